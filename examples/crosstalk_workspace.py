@@ -1,0 +1,245 @@
+"""Build and test the crosstalk_demo package in a throwaway colcon workspace.
+
+examples/demo.py and tests/test_example_package.py both drive colcon through these helpers,
+so the demo and its test check exactly the same thing. Everything is derived from the
+interpreter running this module (a virtualenv with ROS 2, ament_cmake and colcon), so no
+ROS setup script has to be sourced first.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+PACKAGE = "crosstalk_demo"
+PACKAGE_DIR = Path(__file__).resolve().parent / PACKAGE
+RUNNERS = ("isolated", "plain", "upstream")
+DEFAULT_JOBS = 6
+
+_SUMMARY = re.compile(
+    r"^Summary: (\d+) tests?, (\d+) errors?, (\d+) failures?, (\d+) skipped", re.MULTILINE
+)
+_ADD_TEST = re.compile(r"^add_test\(\[=\[(?P<name>[^\]]+)\]=\] (?P<args>.*)\)$", re.MULTILINE)
+_QUOTED = re.compile(r'"((?:[^"\\]|\\.)*)"')
+
+
+class WorkspaceError(RuntimeError):
+    """A colcon step failed in a way that leaves nothing to report on (not a test failure)."""
+
+
+def colcon_env() -> dict[str, str]:
+    """Return the environment for colcon, CMake, ctest and the tests.
+
+    CMake finds ament_cmake under the interpreter's prefix (share/ament_cmake/cmake) only
+    if that prefix is on CMAKE_PREFIX_PATH or its bin/ is on PATH; we set both, in front,
+    so a ROS install sourced in the user's shell cannot shadow it. PATH also provides
+    colcon and ros-isolated-test. ROS_DOMAIN_ID goes: the isolated runner refuses a preset
+    one, and the control must run on the default domain like an unconfigured machine.
+    """
+    env = dict(os.environ)
+    prefix = sys.prefix
+    env["PATH"] = os.pathsep.join(p for p in (str(Path(prefix) / "bin"), env.get("PATH")) if p)
+    env["CMAKE_PREFIX_PATH"] = os.pathsep.join(
+        p for p in (prefix, env.get("CMAKE_PREFIX_PATH")) if p
+    )
+    env.pop("ROS_DOMAIN_ID", None)
+    return env
+
+
+def isolated_runner_problem() -> str | None:
+    """Say why `ros-isolated-test runner-path` cannot give a runner, or None if it can."""
+    try:
+        proc = subprocess.run(
+            ["ros-isolated-test", "runner-path"],
+            env=colcon_env(),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+    except FileNotFoundError:
+        return "the ros-isolated-test command is not installed"
+    path = proc.stdout.strip()
+    if proc.returncode != 0:
+        return f"`ros-isolated-test runner-path` exited {proc.returncode}: {proc.stderr.strip()}"
+    if not Path(path).is_file():
+        return f"`ros-isolated-test runner-path` printed {path!r}, which is not a file"
+    return None
+
+
+@dataclass(frozen=True)
+class Record:
+    """What one token_talker process wrote about itself (CROSSTALK_RECORD_DIR/<token>.json)."""
+
+    token: str
+    domain_id: str | None
+    pid: int
+    start: float
+    end: float
+    own_received: int
+    foreign: dict[str, int]
+    passed: bool
+
+
+@dataclass(frozen=True)
+class Case:
+    """One registered ctest test: its name, its token, and its record if it wrote one."""
+
+    name: str
+    token: str
+    record: Record | None
+
+
+@dataclass(frozen=True)
+class ResultSummary:
+    """The totals line of `colcon test-result --all` and that command's exit status."""
+
+    line: str
+    tests: int
+    errors: int
+    failures: int
+    skipped: int
+    returncode: int
+
+
+@dataclass(frozen=True)
+class Run:
+    """Everything one build-and-test of the package under one runner produced."""
+
+    runner: str
+    runner_path: str
+    base: Path
+    build_seconds: float
+    test_seconds: float
+    test_output: str
+    cases: tuple[Case, ...]
+    result: ResultSummary
+
+    @property
+    def domain_ids(self) -> list[str | None]:
+        return [c.record.domain_id if c.record else None for c in self.cases]
+
+    @property
+    def all_passed(self) -> bool:
+        return all(c.record is not None and c.record.passed for c in self.cases)
+
+
+def _colcon(args: list[str], cwd: Path, extra_env: dict[str, str] | None = None) -> tuple[int, str]:
+    env = colcon_env()
+    env.update(extra_env or {})
+    proc = subprocess.run(
+        ["colcon", *args],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        check=False,
+    )
+    return proc.returncode, proc.stdout
+
+
+def _common(base: Path) -> list[str]:
+    return [
+        "--base-paths", str(PACKAGE_DIR),
+        "--build-base", str(base / "build"),
+        "--install-base", str(base / "install"),
+    ]  # fmt: skip
+
+
+def build(workspace: Path, runner: str) -> Path:
+    """Configure and build the package for one runner in <workspace>/<runner>; return that dir.
+
+    Each runner gets its own build dir because the runner is baked into CTestTestfile.cmake
+    at configure time.
+    """
+    if runner not in RUNNERS:
+        raise ValueError(f"runner must be one of {RUNNERS}, not {runner!r}")
+    base = workspace / runner
+    base.mkdir(parents=True, exist_ok=True)
+    cmake_args = [f"-DCROSSTALK_RUNNER={runner}", f"-DPython3_EXECUTABLE={sys.executable}"]
+    code, output = _colcon(
+        ["--log-base", str(base / "log"), "build", *_common(base), "--cmake-args", *cmake_args],
+        cwd=workspace,
+    )
+    if code != 0:
+        raise WorkspaceError(f"colcon build with CROSSTALK_RUNNER={runner} failed:\n{output}")
+    return base
+
+
+def registered_tests(base: Path) -> tuple[str, dict[str, str]]:
+    """Read the runner path and each test's token from the CTestTestfile.cmake CMake wrote.
+
+    Reading what ctest will actually run, rather than repeating CMakeLists.txt, keeps the
+    report honest about which runner wrapped the tests.
+    """
+    text = (base / "build" / PACKAGE / "CTestTestfile.cmake").read_text()
+    runner_path = ""
+    tokens: dict[str, str] = {}
+    for match in _ADD_TEST.finditer(text):
+        args = _QUOTED.findall(match["args"])
+        runner_path = args[args.index("-u") + 1]
+        tokens[match["name"]] = args[-1]
+    if not tokens:
+        raise WorkspaceError(f"no tests registered in {base / 'build' / PACKAGE}")
+    return runner_path, tokens
+
+
+def read_records(record_dir: Path) -> dict[str, Record]:
+    """Load every <token>.json the test processes wrote, keyed by token."""
+    records: dict[str, Record] = {}
+    for path in sorted(record_dir.glob("*.json")):
+        data = json.loads(path.read_text())
+        records[data["token"]] = Record(**data)
+    return records
+
+
+def result_summary(base: Path) -> ResultSummary:
+    """Run `colcon test-result --all` on the build dir and parse its totals line."""
+    code, output = _colcon(
+        ["--log-base", str(base / "log"), "test-result", "--test-result-base",
+         str(base / "build"), "--all"],
+        cwd=base,
+    )  # fmt: skip
+    matches = list(_SUMMARY.finditer(output))
+    if not matches:
+        raise WorkspaceError(f"no summary line in `colcon test-result` output:\n{output}")
+    match = matches[-1]  # the totals line comes last, after one line per result file
+    tests, errors, failures, skipped = (int(g) for g in match.groups())
+    return ResultSummary(match[0], tests, errors, failures, skipped, code)
+
+
+def run(workspace: Path, runner: str, jobs: int = DEFAULT_JOBS) -> Run:
+    """Build, run all tests at once with `colcon test --ctest-args -jN`, and collect results."""
+    started = time.monotonic()
+    base = build(workspace, runner)
+    built = time.monotonic()
+    record_dir = base / "records"
+    record_dir.mkdir(exist_ok=True)
+    for old in record_dir.glob("*.json"):
+        old.unlink()
+    _, test_output = _colcon(
+        ["--log-base", str(base / "log"), "test", *_common(base), "--ctest-args", f"-j{jobs}"],
+        cwd=workspace,
+        extra_env={"CROSSTALK_RECORD_DIR": str(record_dir)},
+    )
+    tested = time.monotonic()
+    runner_path, tokens = registered_tests(base)
+    records = read_records(record_dir)
+    cases = tuple(Case(name, token, records.get(token)) for name, token in sorted(tokens.items()))
+    return Run(
+        runner=runner,
+        runner_path=runner_path,
+        base=base,
+        build_seconds=built - started,
+        test_seconds=tested - built,
+        test_output=test_output,
+        cases=cases,
+        result=result_summary(base),
+    )

@@ -1,0 +1,62 @@
+"""The machine-wide lock directory that every runner, user and container shares."""
+
+from __future__ import annotations
+
+import os
+import stat
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+LOCK_DIR_ENV = "ROS_ISOLATED_TEST_LOCK_DIR"
+DEFAULT_DIR_NAME = "ros-isolated-test-domains"
+#: Like /tmp: everyone may create lock files, nobody may delete another user's.
+SHARED_DIR_MODE = 0o1777
+
+
+class LockDirError(RuntimeError):
+    """The lock directory cannot be used; the message names the path and the fix."""
+
+
+def lock_dir_from_env(environ: Mapping[str, str] | None = None) -> Path:
+    """``ROS_ISOLATED_TEST_LOCK_DIR``, else a fixed folder under the system temp dir.
+
+    The default is the same path for every user (not ``$TMPDIR``-relative per user), so
+    all runners on a machine, and containers bind-mounting it, see one set of locks.
+    """
+    environ = os.environ if environ is None else environ
+    configured = environ.get(LOCK_DIR_ENV, "").strip()
+    if configured:
+        return Path(configured)
+    return Path("/tmp" if os.path.isdir("/tmp") else tempfile.gettempdir()) / DEFAULT_DIR_NAME
+
+
+def ensure_lock_dir(path: Path) -> Path:
+    """Create the directory shared (mode 1777) if missing; refuse anything that is not one."""
+    try:
+        os.mkdir(path, 0o700)
+    except FileExistsError:
+        pass
+    except OSError as error:
+        raise LockDirError(
+            f"cannot create lock directory {path}: {error.strerror}; "
+            f"create it (mode 1777) or point {LOCK_DIR_ENV} at a writable directory"
+        ) from None
+    else:
+        # mkdir's mode is cut by the umask; chmod is not.
+        os.chmod(path, SHARED_DIR_MODE)
+    try:
+        info = os.lstat(path)
+    except OSError as error:
+        raise LockDirError(f"cannot read lock directory {path}: {error.strerror}") from None
+    if stat.S_ISLNK(info.st_mode) or not stat.S_ISDIR(info.st_mode):
+        raise LockDirError(
+            f"lock directory {path} is not a directory (a file or a symlink is there); "
+            f"remove it or point {LOCK_DIR_ENV} at a directory"
+        )
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise LockDirError(
+            f"lock directory {path} is not writable by this user; "
+            f"make it mode 1777 (chmod 1777 {path}) or point {LOCK_DIR_ENV} elsewhere"
+        )
+    return path

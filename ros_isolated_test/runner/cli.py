@@ -1,0 +1,174 @@
+"""The ``ros-isolated-test`` command: parses arguments into a request and nothing more."""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import asdict
+from importlib import resources
+from pathlib import Path
+
+import click
+
+from ros_isolated_test import __version__
+from ros_isolated_test.domain_coordinator import (
+    LOCK_DIR_ENV,
+    POOL_ENV,
+    PoolSpecError,
+    held_domains,
+    lock_dir_from_env,
+)
+from ros_isolated_test.domain_coordinator.pool import pool_from_env
+from ros_isolated_test.runner import session
+from ros_isolated_test.runner.request import Mode, RunRequest
+
+EXIT_CODES_HELP = """\b
+Exit codes:
+  N        the command's own exit code (0 passed)
+  128+N    the command was killed by signal N
+  1        the test's result file reports failures, or it wrote none
+  2        nothing was run: bad arguments, or ROS_DOMAIN_ID was preset
+  3        nothing was run: no domain ID could be reserved
+  124      stopped by --timeout
+  126/127  the command could not be executed / was not found
+"""
+
+ENVIRONMENT_HELP = f"""\b
+Environment:
+  {POOL_ENV}   domain IDs to hand out (default 1-101, e.g. 1-50,215-232)
+  {LOCK_DIR_ENV}  the lock directory shared by all runners on the machine
+  DISABLE_ROS_ISOLATION=1     run without reserving an ID (loudly)
+"""
+
+
+@click.group(
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    epilog=ENVIRONMENT_HELP,
+)
+@click.version_option(__version__, prog_name="ros-isolated-test")
+def cli() -> None:
+    """Run ROS 2 tests in parallel, each on a ROS_DOMAIN_ID of its own.
+
+    A machine-wide coordinator on file locks gives every test a free domain ID, so
+    tests run at once (colcon test, ctest -j) never hear each other.
+    """
+
+
+@cli.command(
+    context_settings={"ignore_unknown_options": True, "allow_interspersed_args": False},
+    epilog=f"{EXIT_CODES_HELP}\n\b\nExample:\n  ros-isolated-test run --junit-xml out.xml -- "
+    "python3 -m pytest test/test_talker.py",
+)
+@click.option(
+    "--junit-xml",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write an xUnit result file here (passed, failed with the output tail, or refused).",
+)
+@click.option(
+    "--output-file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write all output to this file, as it is produced.",
+)
+@click.option("--package-name", help="Package name for suite and class names in the result.")
+@click.option(
+    "--timeout",
+    type=click.FloatRange(min=0, min_open=True),
+    metavar="SECONDS",
+    help="Stop the test after this long (SIGTERM, then SIGKILL after --kill-grace); exit 124.",
+)
+@click.option(
+    "--kill-grace",
+    type=click.FloatRange(min=0),
+    default=5.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="Time between SIGTERM and SIGKILL when stopping the test.",
+)
+@click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
+def run(
+    junit_xml: Path | None,
+    output_file: Path | None,
+    package_name: str | None,
+    timeout: float | None,
+    kill_grace: float,
+    command: tuple[str, ...],
+) -> None:
+    """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
+
+    Put the command after `--`. Its stdout and stderr are streamed as produced. A
+    ROS_DOMAIN_ID already set in the environment is refused: unset it, or set
+    DISABLE_ROS_ISOLATION=1 to run without isolation.
+    """
+    request = RunRequest(
+        command=command,
+        mode=Mode.SHELL,
+        result_file=junit_xml,
+        package_name=package_name,
+        output_file=output_file,
+        generate_result_on_success=True,
+        timeout=timeout,
+        kill_grace=kill_grace,
+    )
+    sys.exit(session.run(request))
+
+
+@cli.command("runner-path")
+def runner_path() -> None:
+    r"""Print the path of the ctest RUNNER script for ament_add_test / add_launch_test.
+
+    \b
+    In CMakeLists.txt:
+      execute_process(COMMAND ros-isolated-test runner-path
+        OUTPUT_VARIABLE RUNNER OUTPUT_STRIP_TRAILING_WHITESPACE COMMAND_ERROR_IS_FATAL ANY)
+      ament_add_test(my_test RUNNER "${RUNNER}" COMMAND ...)
+    """
+    script = resources.files("ros_isolated_test.runner") / "ament_script" / "run_test_isolated.py"
+    click.echo(str(Path(str(script)).resolve()))
+
+
+@cli.command()
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of a table.")
+def status(as_json: bool) -> None:
+    """List every domain ID of the pool that is held on this machine, and by whom.
+
+    IDs held through their TCP port only (32768+ID) are held by upstream's
+    domain_coordinator or another program; they are skipped too.
+    """
+    lock_dir = lock_dir_from_env()
+    try:
+        pool = pool_from_env()
+    except PoolSpecError as error:
+        raise click.UsageError(str(error)) from None
+    held = held_domains(lock_dir, pool)
+    if as_json:
+        rows = [
+            {
+                "domain_id": item.domain_id,
+                "via": item.via,
+                **(asdict(item.holder) if item.holder else {}),
+            }
+            for item in held
+        ]
+        click.echo(json.dumps(rows, indent=2))
+        return
+    if not held:
+        click.echo(f"No domain ID of the pool is held (lock directory {lock_dir}).")
+        return
+    click.echo(f"{'ID':>3}  {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
+    for item in held:
+        if item.holder is None:
+            who = "port 32768+ID taken (upstream domain_coordinator or another program)"
+            if item.via == "lock":
+                who = "held (no holder record)"
+            click.echo(f"{item.domain_id:>3}  {'-':>7}  {'-':<10} {'-':<19}  {who}")
+            continue
+        holder = item.holder
+        click.echo(
+            f"{item.domain_id:>3}  {holder.pid:>7}  {holder.user:<10.10} "
+            f"{holder.started_iso:<19}  {holder.command}"
+        )
+
+
+def main() -> None:
+    """Console-script entry point."""
+    cli()

@@ -1,0 +1,109 @@
+"""Environment policy: what the test's environment is, and whether isolation may go ahead.
+
+A preset ROS_DOMAIN_ID is refused rather than respected: upstream silently runs the test
+on it, so a developer's exported ID turns a parallel run into crosstalk nobody notices.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from ros_isolated_test.runner.request import EnvAssignment
+
+DOMAIN_VAR = "ROS_DOMAIN_ID"
+DISABLE_VAR = "DISABLE_ROS_ISOLATION"
+_FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
+
+
+class RefusedError(Exception):
+    """Isolation cannot be promised; nothing may run. The message is one line."""
+
+
+@dataclass(frozen=True)
+class Policy:
+    """What the runner decided before anything runs."""
+
+    #: Reserve a domain ID (False only with DISABLE_ROS_ISOLATION).
+    isolate: bool
+    #: The test's environment, without ROS_DOMAIN_ID when ``isolate`` is set.
+    env: dict[str, str]
+    #: Lines to print before the test starts (variables set, loud warnings).
+    notes: tuple[str, ...]
+
+    def for_domain(self, domain_id: int) -> dict[str, str]:
+        """The test's environment once ``domain_id`` is held."""
+        return {**self.env, DOMAIN_VAR: str(domain_id)}
+
+
+def isolation_disabled(environ: Mapping[str, str]) -> bool:
+    """DISABLE_ROS_ISOLATION as upstream reads it (set means disabled), except explicit no's."""
+    value = environ.get(DISABLE_VAR)
+    return value is not None and value.strip().lower() not in _FALSE_WORDS
+
+
+def apply_assignments(
+    base: Mapping[str, str], assignments: Sequence[EnvAssignment]
+) -> tuple[dict[str, str], list[str]]:
+    """run_test.py's ``--env`` then ``--append-env``, and the lines that report them.
+
+    Appending to an unset or empty variable gives the plain value: upstream's leading
+    separator would put the current directory on PATH or LD_LIBRARY_PATH.
+    """
+    env = dict(base)
+    notes: list[str] = []
+    sets = [item for item in assignments if not item.append]
+    appends = [item for item in assignments if item.append]
+    for item in sets:
+        env[item.name] = item.value
+    if sets:
+        notes.append("extra environment variables:")
+        notes.extend(f" - {name}={env[name]}" for name in sorted({i.name for i in sets}))
+    if appends:
+        notes.append("extra environment variables to append:")
+    for item in appends:
+        current = env.get(item.name, "")
+        if current and not current.endswith(os.pathsep):
+            current += os.pathsep
+        env[item.name] = current + item.value
+        notes.append(f" - {item.name}+={item.value}")
+    return env, notes
+
+
+def decide(
+    assignments: Sequence[EnvAssignment],
+    environ: Mapping[str, str] | None = None,
+    env_origin: str = "--env",
+) -> Policy:
+    """Build the test's environment, or raise :class:`RefusedError` for a preset domain."""
+    environ = os.environ if environ is None else environ
+    env, notes = apply_assignments(environ, assignments)
+    disabled = isolation_disabled(environ)
+    preset = [item for item in assignments if item.name == DOMAIN_VAR]
+    if not disabled:
+        if preset:
+            value = env[DOMAIN_VAR]
+            raise RefusedError(
+                f"refusing to run: {DOMAIN_VAR}={value!r} is passed with {env_origin}, so the "
+                f"test would share that domain with whatever else runs in it; remove it from "
+                f"{env_origin} (the runner picks a free ID), or set {DISABLE_VAR}=1 to run "
+                "without isolation"
+            )
+        if DOMAIN_VAR in environ:
+            value = environ[DOMAIN_VAR]
+            meaning = " (empty: ROS reads it as domain 0)" if not value.strip() else ""
+            raise RefusedError(
+                f"refusing to run: {DOMAIN_VAR} is already set to {value!r}{meaning}, so the "
+                f"test would share that domain with whatever else runs in it; unset it "
+                f"(unset {DOMAIN_VAR}) and the runner picks a free ID, or set "
+                f"{DISABLE_VAR}=1 to run without isolation"
+            )
+        return Policy(isolate=True, env=env, notes=tuple(notes))
+    domain = env.get(DOMAIN_VAR)
+    where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
+    warning = (
+        f"WARNING: {DISABLE_VAR} is set: running WITHOUT isolation on {where}; "
+        "this test hears and disturbs every other ROS process on that domain"
+    )
+    return Policy(isolate=False, env=env, notes=(*notes, warning))

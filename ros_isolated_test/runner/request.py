@@ -1,0 +1,64 @@
+"""The one request every entry point builds: shell ``run``, ctest RUNNER, Docker entrypoint."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+
+class Mode(Enum):
+    """Which caller's conventions the exit code follows."""
+
+    #: ``ros-isolated-test run``: exit with the command's own code (128+N for a signal).
+    SHELL = "shell"
+    #: ctest RUNNER (run_test.py's contract): a command that cannot start counts as code 1.
+    AMENT = "ament"
+
+
+@dataclass(frozen=True)
+class EnvAssignment:
+    """One ``--env`` (``append=False``) or ``--append-env`` (``append=True``) argument."""
+
+    name: str
+    value: str
+    append: bool = False
+
+
+@dataclass(frozen=True)
+class RunRequest:
+    """Everything needed to reserve a domain, run one test and write its result."""
+
+    command: tuple[str, ...]
+    mode: Mode
+    result_file: Path | None = None
+    package_name: str | None = None
+    output_file: Path | None = None
+    env: tuple[EnvAssignment, ...] = ()
+    skip_test: bool = False
+    skip_return_code: int | None = None
+    generate_result_on_success: bool = False
+    timeout: float | None = None
+    kill_grace: float = 5.0
+    #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
+    env_origin: str = "--env"
+
+    @property
+    def test_name(self) -> str:
+        """The result file's stem, the name ament gives the test; else the command's name."""
+        if self.result_file is not None:
+            name = self.result_file.name
+            for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
+                if name.endswith(suffix):
+                    return name[: -len(suffix)] or name
+            return name
+        return Path(self.command[0]).name if self.command else "test"
+
+    @property
+    def package(self) -> str:
+        """``--package-name``, else the result file's folder name, as run_test.py does."""
+        if self.package_name:
+            return self.package_name
+        if self.result_file is not None and self.result_file.parent.name:
+            return self.result_file.parent.name
+        return "ros_isolated_test"

@@ -1,0 +1,239 @@
+"""The one orchestration path: reserve a domain, run the test, write its result, pick the code.
+
+Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds a
+:class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shlex
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+from ros_isolated_test.domain_coordinator import (
+    DomainCoordinator,
+    LockDirError,
+    PoolExhaustedError,
+    PoolSpecError,
+)
+from ros_isolated_test.runner import environment, exit_codes, results, supervisor
+from ros_isolated_test.runner.capture import OutputCapture
+from ros_isolated_test.runner.request import Mode, RunRequest
+from ros_isolated_test.runner.results import Case, CaseKind
+
+NO_RESULT = "The test did not generate a result file."
+
+
+class _ResultFile:
+    """The request's result file through its life: placeholder, then the final word."""
+
+    def __init__(self, request: RunRequest) -> None:
+        self.request = request
+        self.path = request.result_file
+        self.properties: dict[str, str] = {"command": shlex.join(request.command)}
+        self.placeholder: bytes | None = None
+
+    def prepare(self) -> None:
+        """Drop a stale file from an earlier run (colcon never clears them) and make the folder."""
+        if self.path is None:
+            return
+        try:
+            self.path.unlink()
+        except FileNotFoundError:
+            pass
+        except IsADirectoryError:
+            pass
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+
+    def write(self, case: Case) -> bytes | None:
+        if self.path is None:
+            return None
+        data = results.render(self.request.package, self.request.test_name, case, self.properties)
+        results.write_atomically(self.path, data)
+        return data
+
+    def write_placeholder(self) -> None:
+        """What ctest leaves behind if it kills the runner: the test did not finish."""
+        self.placeholder = self.write(Case(CaseKind.ERROR, NO_RESULT))
+
+    def untouched(self) -> bool:
+        """Whether the test left our placeholder (or nothing) in place."""
+        if self.path is None:
+            return True
+        if self.placeholder is not None and results.holds_exactly(self.path, self.placeholder):
+            return True
+        return not self.path.exists()
+
+
+def run(request: RunRequest, console: BinaryIO | None = None) -> int:
+    """Reserve, run, write results; return the exit code the caller should exit with."""
+    console = console if console is not None else sys.stdout.buffer
+    result = _ResultFile(request)
+    try:
+        result.prepare()
+        output = _open_output(request.output_file)
+    except OSError as error:
+        message = f"cannot prepare {error.filename}: {error.strerror}; choose a writable path"
+        _error(console, message)
+        return exit_codes.USAGE
+    with output as handle:
+        capture = OutputCapture(console, handle)
+        return _run(request, result, capture, console)
+
+
+def _run(
+    request: RunRequest, result: _ResultFile, capture: OutputCapture, console: BinaryIO
+) -> int:
+    if request.skip_test:
+        capture.note("skipping the test (--skip-test)")
+        result.write(Case(CaseKind.SKIPPED, "Test skipped by developer (SKIP_TEST)"))
+        return exit_codes.PASSED
+    try:
+        policy = environment.decide(request.env, env_origin=request.env_origin)
+    except environment.RefusedError as refusal:
+        return _not_run(result, console, str(refusal), CaseKind.FAILURE, exit_codes.USAGE)
+    result.write_placeholder()
+    try:
+        with _domain(policy, request) as domain_id:
+            if domain_id is not None:
+                capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
+                result.properties["ros_domain_id"] = str(domain_id)
+                env = policy.for_domain(domain_id)
+            else:
+                result.properties["ros_domain_id"] = policy.env.get(
+                    environment.DOMAIN_VAR, "unset (0)"
+                )
+                result.properties["isolation"] = "disabled"
+                env = policy.env
+            for note in policy.notes:
+                capture.note(note)
+            capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
+            outcome = supervisor.run(
+                request.command, env, capture, request.timeout, request.kill_grace
+            )
+    except PoolSpecError as error:
+        return _not_run(result, console, str(error), CaseKind.ERROR, exit_codes.USAGE)
+    except (PoolExhaustedError, LockDirError) as error:
+        return _not_run(result, console, str(error), CaseKind.ERROR, exit_codes.NO_DOMAIN)
+    return _conclude(request, result, capture, outcome)
+
+
+@contextlib.contextmanager
+def _domain(policy: environment.Policy, request: RunRequest) -> Iterator[int | None]:
+    if not policy.isolate:
+        yield None
+        return
+    with DomainCoordinator().reserve(request.command) as reservation:
+        yield reservation.domain_id
+
+
+def _conclude(
+    request: RunRequest,
+    result: _ResultFile,
+    capture: OutputCapture,
+    outcome: supervisor.Outcome,
+) -> int:
+    """Turn how the test ended into the result file and the exit code."""
+    code, reason = _code_and_reason(request, outcome)
+    result.properties["exit"] = reason
+    result.properties["duration"] = f"{outcome.duration:.3f}"
+    if outcome.start_error is not None:
+        capture.note(f"invocation failed: {outcome.start_error}")
+    capture.note(f"the test {reason}")
+    if result.path is None:
+        return code
+    if code == 0 and request.generate_result_on_success:
+        result.write(Case(CaseKind.PASSED, time=outcome.duration))
+        return code
+    if result.untouched():
+        output = capture.tail_text()
+        if request.skip_return_code is not None and outcome.returncode == request.skip_return_code:
+            capture.note(f"return code {outcome.returncode} means skipped (--skip-return-code)")
+            message = f"Test skipped: it returned {outcome.returncode}."
+            result.write(Case(CaseKind.SKIPPED, message, outcome.duration))
+            return code
+        if code == 0:
+            result.write(Case(CaseKind.ERROR, f"{NO_RESULT}\n\n{output}", outcome.duration))
+            capture.note(f"{NO_RESULT} Failing it (write one, or use --generate-result-on-success)")
+            return exit_codes.FAILED
+        kind = CaseKind.ERROR if outcome.start_error is not None else CaseKind.FAILURE
+        detail = f"The test {reason}."
+        if request.mode is Mode.AMENT:
+            detail = f"{NO_RESULT} {detail}"
+        result.write(Case(kind, f"{detail}\n\n{output}", outcome.duration))
+        return code
+    verdict = results.read_verdict(result.path, request.package_name)
+    if not verdict.readable or verdict.failed:
+        capture.note(verdict.detail)
+        return code or exit_codes.FAILED
+    return code
+
+
+def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[int, str]:
+    if outcome.start_error is not None:
+        error = outcome.start_error
+        if request.mode is Mode.AMENT:
+            return exit_codes.FAILED, f"could not be started: {error}"
+        if isinstance(error, FileNotFoundError):
+            return exit_codes.NOT_FOUND, f"could not be started: {error}"
+        return exit_codes.NOT_EXECUTABLE, f"could not be started: {error}"
+    if outcome.timed_out:
+        limit = f"{request.timeout:g}" if request.timeout is not None else "?"
+        return (
+            exit_codes.TIMEOUT,
+            f"timed out after {outcome.duration:.1f} s (--timeout {limit}) and was stopped",
+        )
+    signum = outcome.signal
+    if signum is not None:
+        name = exit_codes.signal_name(signum)
+        how = f"killed by {name} (signal {signum})"
+        if outcome.received_signal is not None:
+            how += f" after the runner received {exit_codes.signal_name(outcome.received_signal)}"
+        return exit_codes.for_signal(signum), how
+    assert outcome.returncode is not None
+    return outcome.returncode, f"exited with code {outcome.returncode}"
+
+
+def report_usage_error(message: str, result_file: Path | None, prog: str) -> int:
+    """Arguments that cannot be understood: say so, and still leave a result file."""
+    request = RunRequest(command=(), mode=Mode.AMENT, result_file=result_file)
+    result = _ResultFile(request)
+    try:
+        result.prepare()
+        return _not_run(
+            result,
+            sys.stdout.buffer,
+            f"{prog}: {message}; see {prog} --help",
+            CaseKind.ERROR,
+            exit_codes.USAGE,
+        )
+    except OSError:
+        _error(sys.stdout.buffer, f"{prog}: {message}; see {prog} --help")
+        return exit_codes.USAGE
+
+
+def _not_run(
+    result: _ResultFile, console: BinaryIO, message: str, kind: CaseKind, code: int
+) -> int:
+    _error(console, message)
+    result.properties["exit"] = "not run"
+    result.write(Case(kind, message))
+    return code
+
+
+def _error(console: BinaryIO, message: str) -> None:
+    """One line on stderr, where CI and humans look for errors; flushed after stdout."""
+    with contextlib.suppress(BrokenPipeError, ValueError):
+        console.flush()
+    print(f"ros-isolated-test: error: {message}", file=sys.stderr, flush=True)
+
+
+def _open_output(path: Path | None) -> contextlib.AbstractContextManager[BinaryIO | None]:
+    if path is None:
+        return contextlib.nullcontext()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return open(path, "wb")

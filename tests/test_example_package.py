@@ -1,0 +1,117 @@
+"""End to end: the crosstalk_demo ament_cmake package, built and tested with real colcon.
+
+Six rclpy tests publish on one topic at once (ctest -j6). Through our runner each must get
+its own ROS_DOMAIN_ID and pass; through ament's plain run_test.py (the control) the same
+tests must fail, which is what shows the passes come from isolation and not from luck.
+The workspace helpers are the demo's own (examples/crosstalk_workspace.py), loaded by path.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import itertools
+import shutil
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+import pytest
+
+if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path below
+    from crosstalk_workspace import Record, Run
+
+
+def _load_helpers() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "examples" / "crosstalk_workspace.py"
+    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while being created
+    spec.loader.exec_module(module)
+    return module
+
+
+ws = _load_helpers()
+
+pytestmark = [
+    pytest.mark.colcon,
+    pytest.mark.skipif(
+        importlib.util.find_spec("rclpy") is None
+        or shutil.which("colcon", path=ws.colcon_env()["PATH"]) is None,
+        reason="needs rclpy and colcon from the ros extra (scripts/setup.sh installs them)",
+    ),
+]
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("crosstalk_ws")
+
+
+@pytest.fixture(scope="module")
+def isolated_run(workspace: Path) -> Run:
+    problem = ws.isolated_runner_problem()
+    if problem:
+        pytest.skip(f"ros-isolated-test's runner is not available: {problem}")
+    run: Run = ws.run(workspace, "isolated")
+    return run
+
+
+@pytest.fixture(scope="module")
+def plain_run(workspace: Path) -> Run:
+    run: Run = ws.run(workspace, "plain")
+    return run
+
+
+def _records(run: Run) -> list[Record]:
+    missing = [c.name for c in run.cases if c.record is None]
+    assert not missing, f"no record from {missing}:\n{run.test_output}"
+    return [c.record for c in run.cases if c.record is not None]
+
+
+def test_isolated_all_six_pass(isolated_run: Run) -> None:
+    records = _records(isolated_run)
+    assert len(records) == 6
+    failed = {r.token: r.foreign for r in records if not r.passed}
+    assert not failed, f"crosstalk despite isolation: {failed}"
+    assert all(r.own_received > 0 for r in records)
+
+
+def test_isolated_domain_ids_distinct_and_nonzero(isolated_run: Run) -> None:
+    ids = [r.domain_id for r in _records(isolated_run)]
+    assert None not in ids, f"a test ran without ROS_DOMAIN_ID: {ids}"
+    assert len(set(ids)) == 6, f"domain IDs shared: {ids}"
+    assert all(int(i) > 0 for i in ids if i is not None), f"domain 0 handed out: {ids}"
+
+
+def test_isolated_tests_ran_at_the_same_time(isolated_run: Run) -> None:
+    records = _records(isolated_run)
+    for a, b in itertools.combinations(records, 2):
+        assert a.start < b.end and b.start < a.end, (
+            f"{a.token} and {b.token} did not overlap: "
+            f"[{a.start:.2f}, {a.end:.2f}] vs [{b.start:.2f}, {b.end:.2f}]"
+        )
+
+
+def test_isolated_colcon_test_result_clean(isolated_run: Run) -> None:
+    result = isolated_run.result
+    assert result.returncode == 0, result.line
+    assert (result.errors, result.failures) == (0, 0), result.line
+    assert result.tests >= 6, result.line
+
+
+def test_plain_control_fails_with_crosstalk(plain_run: Run) -> None:
+    records = _records(plain_run)
+    assert all(r.domain_id in (None, "0") for r in records)
+    heard = [r for r in records if not r.passed and r.foreign]
+    assert len(heard) >= 4, (
+        f"only {len(heard)} of 6 tests heard crosstalk on a shared domain; the control is "
+        f"too weak to prove anything:\n{plain_run.test_output}"
+    )
+
+
+def test_plain_colcon_test_result_reports_failures(plain_run: Run) -> None:
+    result = plain_run.result
+    assert result.returncode != 0, result.line
+    assert result.failures + result.errors >= 4, result.line
