@@ -7,4 +7,5 @@ cd "$root"
 scripts/setup.sh
 .venv/bin/ruff check ros_isolated_test tests examples scripts
 .venv/bin/mypy
+scripts/py310_smoke.sh
 exec .venv/bin/python -m pytest "$@"
