@@ -41,6 +41,7 @@ def colcon_env() -> dict[str, str]:
     so a ROS install sourced in the user's shell cannot shadow it. PATH also provides
     colcon and ros-isolated-test. ROS_DOMAIN_ID goes: the isolated runner refuses a preset
     one, and the control must run on the default domain like an unconfigured machine.
+    DISABLE_ROS_ISOLATION goes too, or the isolated run would not isolate.
     """
     env = dict(os.environ)
     prefix = sys.prefix
@@ -48,7 +49,8 @@ def colcon_env() -> dict[str, str]:
     env["CMAKE_PREFIX_PATH"] = os.pathsep.join(
         p for p in (prefix, env.get("CMAKE_PREFIX_PATH")) if p
     )
-    env.pop("ROS_DOMAIN_ID", None)
+    for name in ("ROS_DOMAIN_ID", "DISABLE_ROS_ISOLATION"):
+        env.pop(name, None)
     return env
 
 

@@ -2,7 +2,7 @@
 # Installs everything the demo and the test suite need, into .venv beside this script's
 # project: system build tools (cmake, a C++ compiler) from Debian when missing, then
 # ros-isolated-test with real ROS 2 Jazzy, ament_cmake and colcon from PyPI.
-# Safe to run again: it only reinstalls when pyproject.toml changed.
+# Safe to run again: it only installs again when pyproject.toml changed.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$root"
@@ -27,12 +27,13 @@ fi
 
 stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
 if [[ ! -f $stamp ]]; then
-  echo "setup: creating .venv with ros-isolated-test, ROS 2 Jazzy, ament_cmake and colcon (about a minute)"
-  rm -rf .venv
-  "$python" -m venv .venv
+  echo "setup: installing ros-isolated-test, ROS 2 Jazzy, ament_cmake and colcon into .venv (about a minute)"
+  # Reuse an existing .venv: pip only adds what changed, and a running test keeps working.
+  [[ -x .venv/bin/python ]] || "$python" -m venv .venv
   # pip's notes about local index folders that do not exist here are noise: keep real errors.
   .venv/bin/python -m pip install -q --upgrade pip 2>&1 | { grep -v '^WARNING: Location' || true; }
   .venv/bin/python -m pip install -q -e ".[ros,dev]" 2>&1 | { grep -v '^WARNING: Location' || true; }
   .venv/bin/ros-isolated-test --help >/dev/null
+  rm -f .venv/.installed-*
   touch "$stamp"
 fi

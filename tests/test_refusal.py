@@ -1,0 +1,174 @@
+"""A preset ROS_DOMAIN_ID is refused, in the shell ``run`` and in the ctest RUNNER alike.
+
+Upstream silently runs on a preset ID; we refuse, because an exported ID turns a parallel
+run into crosstalk nobody notices. DISABLE_ROS_ISOLATION=1 is the documented way out.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from collections.abc import Sequence
+from pathlib import Path
+
+import pytest
+from conftest import run_cli, run_runner
+from test_ament_contract import load_result
+
+ERROR_PREFIX = "ros-isolated-test: error: "
+MODES = ["shell", "runner"]
+
+
+def invoke(
+    mode: str,
+    runner_script: str,
+    env: dict[str, str],
+    cwd: Path,
+    command: Sequence[str],
+    result: Path | None = None,
+    runner_options: Sequence[str] = (),
+) -> subprocess.CompletedProcess[str]:
+    """Run ``command`` through ``ros-isolated-test run`` or the RUNNER script."""
+    if mode == "shell":
+        assert not runner_options
+        junit = ["--junit-xml", str(result)] if result is not None else []
+        return run_cli(["run", *junit, "--", *command], env, cwd=cwd)
+    result = result if result is not None else cwd / "pkg" / "t.xml"
+    args = [
+        str(result),
+        "--package-name",
+        "pkg",
+        "--generate-result-on-success",
+        *runner_options,
+        "--command",
+        *command,
+    ]
+    return run_runner(runner_script, args, env, cwd=cwd)
+
+
+def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, f"expected exactly one line on stderr, got:\n{proc.stderr}"
+    assert lines[0].startswith(ERROR_PREFIX), lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("value", ["5", ""], ids=["set", "empty"])
+def test_preset_domain_id_is_refused_and_nothing_runs(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str, value: str
+) -> None:
+    env["ROS_DOMAIN_ID"] = value
+    proc = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists(), "a refused test must not run"
+    assert "Running with ROS_DOMAIN_ID" not in proc.stdout
+    line = the_error_line(proc)
+    assert f"ROS_DOMAIN_ID is already set to {value!r}" in line
+    assert "share that domain" in line, "the message must say why"
+    assert "unset ROS_DOMAIN_ID" in line, "the message must name the way out"
+    assert "DISABLE_ROS_ISOLATION=1" in line
+    if not value:
+        assert "domain 0" in line
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_refusal_is_recorded_in_the_result_file_as_a_failed_case(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env["ROS_DOMAIN_ID"] = "17"
+    result = tmp_path / "out" / "pkg" / "t.xml"
+    proc = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"], result=result)
+    assert proc.returncode == 2
+    assert not (tmp_path / "ran").exists()
+    message = the_error_line(proc).removeprefix(ERROR_PREFIX)
+    case = load_result(result).only
+    assert case.outcome == "failure"
+    assert case.message == message
+    assert "ROS_DOMAIN_ID is already set to '17'" in case.text
+
+
+@pytest.mark.parametrize("option", ["--env", "--append-env"])
+def test_domain_id_passed_with_env_option_is_refused(
+    runner_script: str, env: dict[str, str], tmp_path: Path, option: str
+) -> None:
+    result = tmp_path / "pkg" / "t.xml"
+    proc = invoke(
+        "runner",
+        runner_script,
+        env,
+        tmp_path,
+        ["touch", "ran"],
+        result=result,
+        runner_options=[option, "ROS_DOMAIN_ID=7"],
+    )
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists()
+    line = the_error_line(proc)
+    assert "ROS_DOMAIN_ID='7'" in line
+    assert "--env" in line
+    assert "DISABLE_ROS_ISOLATION=1" in line
+    case = load_result(result).only
+    assert case.outcome == "failure"
+    assert case.message == line.removeprefix(ERROR_PREFIX)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_disable_ros_isolation_runs_with_the_preset_id_and_warns(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env["ROS_DOMAIN_ID"] = "42"
+    env["DISABLE_ROS_ISOLATION"] = "1"
+    result = tmp_path / "pkg" / "t.xml"
+    proc = invoke(
+        mode, runner_script, env, tmp_path, ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"'], result
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "seen=42\n" in proc.stdout
+    assert "Running with ROS_DOMAIN_ID" not in proc.stdout
+    warnings = [line for line in proc.stdout.splitlines() if "WARNING" in line]
+    assert len(warnings) == 1, proc.stdout
+    assert "ROS_DOMAIN_ID=42" in warnings[0]
+    assert "WITHOUT isolation" in warnings[0]
+    summary = load_result(result)
+    assert summary.only.outcome == "passed"
+    assert summary.properties["ros_domain_id"] == "42"
+
+
+def test_disable_ros_isolation_lets_env_option_set_the_id(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    env["DISABLE_ROS_ISOLATION"] = "1"
+    proc = invoke(
+        "runner",
+        runner_script,
+        env,
+        tmp_path,
+        ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"'],
+        runner_options=["--env", "ROS_DOMAIN_ID=7"],
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "seen=7\n" in proc.stdout
+    assert any("WARNING" in line and "ROS_DOMAIN_ID=7" in line for line in proc.stdout.splitlines())
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("word", ["0", "false"])
+def test_disable_ros_isolation_0_does_not_disable(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str, word: str
+) -> None:
+    env["DISABLE_ROS_ISOLATION"] = word
+    env["ROS_DOMAIN_ID"] = "5"
+    proc = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists()
+    assert "ROS_DOMAIN_ID is already set to '5'" in the_error_line(proc)
+
+    del env["ROS_DOMAIN_ID"]
+    isolated = invoke(
+        mode, runner_script, env, tmp_path, ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"']
+    )
+    assert isolated.returncode == 0, isolated.stdout + isolated.stderr
+    first = isolated.stdout.splitlines()[0]
+    assert first.startswith("Running with ROS_DOMAIN_ID ")
+    assert f"seen={first.split()[-1]}\n" in isolated.stdout
+    assert "WARNING" not in isolated.stdout
