@@ -59,7 +59,13 @@ def run_cli(
 ) -> subprocess.CompletedProcess[str]:
     """``ros-isolated-test ARGS`` as a real process, output captured as text."""
     return subprocess.run(  # type: ignore[call-overload, no-any-return]
-        [CLI, *args], env=dict(env), capture_output=True, text=True, timeout=120, **kwargs
+        [CLI, *args],
+        check=False,
+        env=dict(env),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        **kwargs,
     )
 
 
@@ -69,6 +75,7 @@ def run_runner(
     """The RUNNER script exactly as ctest calls it: ``python3 -u <script> ARGS``."""
     return subprocess.run(  # type: ignore[call-overload, no-any-return]
         [sys.executable, "-u", runner_script, *args],
+        check=False,
         env=dict(env),
         capture_output=True,
         text=True,

@@ -6,6 +6,7 @@ import contextlib
 import json
 import os
 import pwd
+import shlex
 import socket
 import tempfile
 import time
@@ -52,7 +53,7 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
         domain_id=domain_id,
         pid=os.getpid(),
         user=current_user(),
-        command=" ".join(command),
+        command=shlex.join(command),
         started=time.time(),
         host=socket.gethostname(),
     )

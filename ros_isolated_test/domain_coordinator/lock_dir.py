@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
 import tempfile
@@ -31,20 +32,32 @@ def lock_dir_from_env(environ: Mapping[str, str] | None = None) -> Path:
     return Path("/tmp" if os.path.isdir("/tmp") else tempfile.gettempdir()) / DEFAULT_DIR_NAME
 
 
-def ensure_lock_dir(path: Path) -> Path:
-    """Create the directory shared (mode 1777) if missing; refuse anything that is not one."""
+def _create_shared(path: Path) -> None:
+    """Make the directory appear with mode 1777 at once: built aside, then renamed in.
+
+    A directory created in place is briefly mode 0700 (mkdir's mode is cut by the
+    umask), and another user's runner arriving then would find it unwritable.
+    """
     try:
-        os.mkdir(path, 0o700)
-    except FileExistsError:
-        pass
+        staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     except OSError as error:
         raise LockDirError(
             f"cannot create lock directory {path}: {error.strerror}; "
             f"create it (mode 1777) or point {LOCK_DIR_ENV} at a writable directory"
         ) from None
-    else:
-        # mkdir's mode is cut by the umask; chmod is not.
-        os.chmod(path, SHARED_DIR_MODE)
+    try:
+        os.chmod(staging, SHARED_DIR_MODE)
+        os.rename(staging, path)
+    except OSError:
+        # Another runner created it first (or the rename failed): use what is there.
+        with contextlib.suppress(OSError):
+            os.rmdir(staging)
+
+
+def ensure_lock_dir(path: Path) -> Path:
+    """Create the directory shared (mode 1777) if missing; refuse anything that is not one."""
+    if not os.path.lexists(path):
+        _create_shared(path)
     try:
         info = os.lstat(path)
     except OSError as error:

@@ -2,25 +2,23 @@
 
 The kernel drops a flock when the last descriptor of its open file closes, so an ID
 comes free however its holder dies (exit, crash, SIGKILL): no stale-lock cleanup, no
-timeouts, no daemon.
+timeouts, no daemon. The descriptor is close-on-exec: the test does not inherit it.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import socket
+import stat
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from filelock import FileLock, Timeout
+from filelock import lock_descriptor
 
 from ros_isolated_test.domain_coordinator import holder, port_guard
-from ros_isolated_test.domain_coordinator.lock_dir import (
-    LockDirError,
-    ensure_lock_dir,
-    lock_dir_from_env,
-)
+from ros_isolated_test.domain_coordinator.lock_dir import ensure_lock_dir, lock_dir_from_env
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
 
 #: Lock files are shared by all users: each must be able to open and flock them.
@@ -41,7 +39,7 @@ class Reservation:
     """A held domain ID. Release it with :meth:`release` (or leave the ``with`` block)."""
 
     domain_id: int
-    lock: FileLock
+    lock_fd: int
     port: socket.socket
     record: Path
     released: bool = field(default=False, init=False)
@@ -53,24 +51,52 @@ class Reservation:
         self.released = True
         holder.remove_record(self.record)
         self.port.close()
-        self.lock.release()
+        os.close(self.lock_fd)
 
 
-def try_lock(lock_dir: Path, domain_id: int) -> FileLock | None:
-    """One non-blocking attempt at the ID's lock; None when someone holds it."""
-    path = lock_path(lock_dir, domain_id)
-    lock = FileLock(path, mode=LOCK_FILE_MODE, thread_local=False)
+def _open_lock_file(path: Path) -> int | None:
+    """A read-only descriptor of the ID's lock file, created shared if missing.
+
+    Read-only is enough for flock, so a lock file another user created can be used
+    whatever its mode lets us write. Never follows a symlink; anything but a regular
+    file at the path (planted by someone, in a world-writable directory) means None.
+    """
+    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
     try:
-        lock.acquire(blocking=False)
-    except Timeout:
+        fd = os.open(path, flags | os.O_CREAT | os.O_EXCL, LOCK_FILE_MODE)
+    except FileExistsError:
+        try:
+            fd = os.open(path, flags)
+        except OSError:
+            return None
+    except OSError:
         return None
-    except PermissionError as error:
-        raise LockDirError(
-            f"cannot open lock file {path}: {error.strerror}; "
-            "it belongs to another user without write permission for others; "
-            "remove it, or use another lock directory"
-        ) from None
-    return lock
+    else:
+        # The umask cut the mode; every user must be able to open the file.
+        with contextlib.suppress(OSError):
+            os.fchmod(fd, LOCK_FILE_MODE)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        return None
+    return fd
+
+
+def try_lock(lock_dir: Path, domain_id: int) -> int | None:
+    """One non-blocking attempt at the ID's lock: the held descriptor, or None.
+
+    None also when the lock path is unusable (a directory or symlink planted there):
+    such an ID is skipped rather than trusted.
+    """
+    fd = _open_lock_file(lock_path(lock_dir, domain_id))
+    if fd is None:
+        return None
+    try:
+        if lock_descriptor(fd, blocking=False):
+            return fd
+    except OSError:
+        pass
+    os.close(fd)
+    return None
 
 
 class DomainCoordinator:
@@ -88,20 +114,20 @@ class DomainCoordinator:
         """
         ensure_lock_dir(self.lock_dir)
         for domain_id in self.pool:
-            lock = try_lock(self.lock_dir, domain_id)
-            if lock is None:
+            lock_fd = try_lock(self.lock_dir, domain_id)
+            if lock_fd is None:
                 continue
             port = port_guard.claim_port(domain_id)
             if port is None:
-                lock.release()
+                os.close(lock_fd)
                 continue
             try:
                 record = holder.write_record(self.lock_dir, domain_id, command)
             except BaseException:
                 port.close()
-                lock.release()
+                os.close(lock_fd)
                 raise
-            return Reservation(domain_id, lock, port, record)
+            return Reservation(domain_id, lock_fd, port, record)
         return None
 
     @contextlib.contextmanager

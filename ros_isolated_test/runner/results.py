@@ -46,14 +46,14 @@ class Case:
     time: float = 0.0
 
 
-def xml_safe(text: str, limit: int = MAX_TEXT_CHARS) -> str:
+def xml_safe(text: str, limit: int | None = MAX_TEXT_CHARS) -> str:
     """Text any XML 1.0 reader accepts: colour codes dropped, other illegal characters shown.
 
     Over ``limit`` the head and tail are kept around a marked cut.
     """
     text = _ANSI_ESCAPE.sub("", text)
     text = _ILLEGAL_XML.sub(lambda match: f"\\x{ord(match.group()):02x}", text)
-    if len(text) > limit:
+    if limit is not None and len(text) > limit:
         half = limit // 2
         cut = len(text) - 2 * half
         text = f"{text[:half]}\n[... {cut} characters cut ...]\n{text[-half:]}"
@@ -147,7 +147,7 @@ def read_verdict(path: Path, package: str | None = None) -> Verdict:
         root = etree.fromstring(data, _safe_parser())
         tidied = False
     except etree.XMLSyntaxError as error:
-        text = xml_safe(data.decode("utf-8", errors="replace"), limit=len(data) + 1)
+        text = xml_safe(data.decode("utf-8", errors="replace"), limit=None)
         text = re.sub(r"^<\?xml[^>]*\?>", "", text.lstrip("\ufeff"))
         try:
             root = etree.fromstring(text.encode(), _safe_parser())

@@ -7,6 +7,7 @@ Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shlex
 import sys
@@ -41,12 +42,10 @@ class _ResultFile:
         """Drop a stale file from an earlier run (colcon never clears them) and make the folder."""
         if self.path is None:
             return
-        try:
+        if self.path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "it is a directory", str(self.path))
+        with contextlib.suppress(FileNotFoundError):
             self.path.unlink()
-        except FileNotFoundError:
-            pass
-        except IsADirectoryError:
-            pass
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
     def write(self, case: Case) -> bytes | None:
@@ -75,11 +74,21 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     result = _ResultFile(request)
     try:
         result.prepare()
-        output = _open_output(request.output_file)
     except OSError as error:
-        message = f"cannot prepare {error.filename}: {error.strerror}; choose a writable path"
+        message = (
+            f"cannot use result file {request.result_file}: {error.strerror}; "
+            "choose a writable file path"
+        )
         _error(console, message)
         return exit_codes.USAGE
+    try:
+        output = _open_output(request.output_file)
+    except OSError as error:
+        message = (
+            f"cannot open output file {request.output_file}: {error.strerror}; "
+            "choose a writable file path"
+        )
+        return _not_run(result, console, message, CaseKind.ERROR, exit_codes.USAGE)
     with output as handle:
         capture = OutputCapture(console, handle)
         return _run(request, result, capture, console)
@@ -190,7 +199,7 @@ def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[
     signum = outcome.signal
     if signum is not None:
         name = exit_codes.signal_name(signum)
-        how = f"killed by {name} (signal {signum})"
+        how = f"was killed by {name} (signal {signum})"
         if outcome.received_signal is not None:
             how += f" after the runner received {exit_codes.signal_name(outcome.received_signal)}"
         return exit_codes.for_signal(signum), how

@@ -18,6 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import FrameType
 
+from ros_isolated_test.runner import process_tree
 from ros_isolated_test.runner.capture import OutputCapture
 
 CHUNK_BYTES = 64 * 1024
@@ -82,10 +83,10 @@ def _pump(
     timeout: float | None,
     kill_grace: float,
 ) -> bool:
-    """Copy output until the pipe closes, or the test is gone and the pipe has gone quiet.
+    """Copy output and enforce the timeout until the test has exited and its output is done.
 
-    The second case keeps a leftover background process that still holds the pipe from
-    holding the runner too.
+    Output is done when the pipe closes, or when the test has exited and the pipe has
+    gone quiet: a leftover background process holding the pipe must not hold the runner.
     """
     assert process.stdout is not None
     fd = process.stdout.fileno()
@@ -93,6 +94,7 @@ def _pump(
     deadline = start + timeout if timeout is not None else None
     kill_at: float | None = None
     timed_out = False
+    pipe_open = True
     with selectors.DefaultSelector() as selector:
         selector.register(fd, selectors.EVENT_READ)
         while True:
@@ -105,10 +107,16 @@ def _pump(
                 _signal(process, signal.SIGKILL)
                 kill_at = None
             exited = process.poll() is not None
+            if exited and not pipe_open:
+                break
             wait = DRAIN_IDLE_SECONDS if exited else 0.5
-            for limit in (deadline if not timed_out else None, kill_at):
+            for limit in (None if timed_out else deadline, kill_at):
                 if limit is not None:
                     wait = min(wait, max(0.0, limit - now))
+            if not pipe_open:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    process.wait(wait)
+                continue
             if not selector.select(wait):
                 if exited:
                     break
@@ -117,17 +125,19 @@ def _pump(
                 chunk = os.read(fd, CHUNK_BYTES)
             except BlockingIOError:
                 continue
-            if not chunk:
-                break
-            capture.feed(chunk)
+            if chunk:
+                capture.feed(chunk)
+            else:
+                pipe_open = False
+                selector.unregister(fd)
     process.stdout.close()
     return timed_out
 
 
 def _signal(process: subprocess.Popen[bytes], signum: int) -> None:
+    """Signal the test and everything it started, while the test is still there."""
     if process.poll() is None:
-        with contextlib.suppress(ProcessLookupError):
-            process.send_signal(signum)
+        process_tree.signal_tree(process.pid, signum)
 
 
 def _forward_signals(process: subprocess.Popen[bytes], received: list[int]) -> Callable[[], None]:
