@@ -343,6 +343,7 @@ def test_default_lock_dir_is_the_same_for_every_user(tmp_path: Path) -> None:
         )
         seen.add(result.stdout.strip())
     if os.getuid() == 0:
+        _skip_unless_other_users_can_run_python()
         result = subprocess.run(
             [sys.executable, "-c", code],
             env={**base, "TMPDIR": str(tmp_path), "HOME": "/nonexistent", "USER": "nobody"},
@@ -652,11 +653,31 @@ def test_ctest_runner_works_with_a_poisoned_domain_coordinator_first_on_pythonpa
 # -- every user on the machine shares the lock directory -----------------------------------
 
 
+def _skip_unless_other_users_can_run_python() -> None:
+    """Children run as other users need root, and an interpreter they may execute.
+
+    A virtualenv made from a Python under /root (pyenv) is not executable by others.
+    """
+    if os.getuid() != 0:
+        pytest.skip("needs root to run children as other users")
+    try:
+        subprocess.run(
+            [sys.executable, "-c", "import ros_isolated_test"],
+            check=True,
+            capture_output=True,
+            user=65534,
+            group=65534,
+            extra_groups=[],
+            cwd="/",
+        )
+    except (OSError, subprocess.CalledProcessError) as error:
+        pytest.skip(f"user nobody cannot run this test's Python ({sys.executable}): {error}")
+
+
 @pytest.fixture
 def traversable_dir(tmp_path: Path) -> Iterator[Path]:
     """pytest's tmp dirs are private to root; other users need a way in to share locks."""
-    if os.getuid() != 0:
-        pytest.skip("needs root to run children as other users")
+    _skip_unless_other_users_can_run_python()
     shared = Path(os.environ.get("TMPDIR", "/tmp")) / f"rit-shared-{os.getpid()}-{tmp_path.name}"
     shared.mkdir(mode=0o777)
     os.chmod(shared, 0o777)
