@@ -640,8 +640,11 @@ def test_own_result_file_with_failures_fails(
         cwd=tmp_path,
     )
     assert proc.returncode == (exit_code or 1), proc.stdout + proc.stderr
-    assert result.read_bytes() == written, "the test's own result must be kept"
-    assert [case.outcome for case in load_result(result).cases] == ["passed", "failure"]
+    original = result.with_name(result.name + ".orig")
+    assert original.read_bytes() == written, "the test's own result must be kept beside"
+    outcomes = [case.outcome for case in load_result(result).cases]
+    # A failing test exiting 4 needs no extra case: the failure already says it failed.
+    assert outcomes == ["passed", "failure"]
 
 
 def test_zero_with_generate_flag_wins_over_the_tests_own_file(
@@ -681,7 +684,7 @@ def test_own_clean_result_file_passes_and_is_kept(
     written = own_result(tmp_path / "own.xml", [("a", "passed", ""), ("b", "skipped", "later")])
     proc = ament(runner_script, result, sh('cp own.xml "$1"', str(result)), env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert result.read_bytes() == written
+    assert result.with_name(result.name + ".orig").read_bytes() == written
     assert [case.name for case in load_result(result).cases] == ["a", "b"]
 
 
@@ -692,7 +695,14 @@ def test_own_unparsable_result_file_fails(
     result = tmp_path / "pkg" / "t.xml"
     proc = ament(runner_script, result, sh('cp own.xml "$1"', str(result)), env, cwd=tmp_path)
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    assert "invalid XML" in proc.stdout + proc.stderr
+    assert "cut off or broken at line 1" in proc.stdout
+    cases = load_result(result).cases
+    # The case the file was cut inside is kept (as an error), then what was wrong.
+    assert [(case.name, case.outcome) for case in cases] == [
+        ("unnamed test case 1", "error"),
+        ("result file", "error"),
+    ]
+    assert "Invalid result file t.xml" in cases[-1].message
 
 
 @pytest.mark.parametrize("failing", [False, True], ids=["clean", "with-failure"])
@@ -750,14 +760,15 @@ def test_gtest_result_classnames_are_prefixed_with_the_package_once(
     assert classnames == ["pkg.Suite", "pkg.Already"]
 
 
-def test_non_gtest_result_classnames_are_left_alone(
+def test_every_producers_classnames_get_the_package_prefix_once(
     runner_script: str, env: dict[str, str], tmp_path: Path
 ) -> None:
+    """Upstream prefixes only .gtest.xml; the canonical result prefixes every classname."""
     result = tmp_path / "pkg" / "t.xunit.xml"
     own_result(tmp_path / "own.xml", [("plain", "passed", "")], classname="Suite")
     proc = ament(runner_script, result, sh('cp own.xml "$1"', str(result)), env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert [case.classname for case in load_result(result).cases] == ["Suite"]
+    assert [case.classname for case in load_result(result).cases] == ["pkg.Suite"]
 
 
 # --- --command and help ---------------------------------------------------------------------

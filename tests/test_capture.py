@@ -230,7 +230,7 @@ def test_xml_safe_drops_ansi_codes_and_shows_other_illegal_characters() -> None:
     with pytest.raises(ValueError):
         _embeds(raw)
     safe = xml_safe(raw)
-    assert safe == "red nul\\x00 bell\\x07 vt\\x0b lone-esc\\x1b| ff\\x0c surrogate\\xd800 ok"
+    assert safe == "red nul\\x00 bell\\x07 vt\\x0b lone-esc\\x1b| ff\\x0c surrogate\\ud800 ok"
     assert _embeds(safe) == safe
 
 

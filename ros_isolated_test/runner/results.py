@@ -1,98 +1,157 @@
-"""The result file: every xUnit XML the runner writes or reads is handled here.
+"""The result file: canonical xUnit XML built, checked against our schema, and written.
 
-Written with lxml's element API (never string templates), so escaping is right by
-construction; text is cleaned of characters XML 1.0 cannot carry first, because one
-ANSI colour code would otherwise make the whole file unreadable to every CI tool.
+Built with lxml's element API (never string templates), so escaping is right by
+construction. Every document is validated against ``schemas/junit.xsd`` and its counts
+re-checked before it is written; one that fails is a bug of ours, and is written as a
+valid file that says so instead of being lost.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import re
 import socket
 import tempfile
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass
-from enum import Enum
 from pathlib import Path
 
 from lxml import etree
 
 from ros_isolated_test import __version__
+from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
+from ros_isolated_test.runner.xml_text import xml_safe as _xml_safe
+from ros_isolated_test.runner.xunit_reader import TEXT_LIMIT
+from ros_isolated_test.schemas import junit_schema
 
-#: Longest text kept in one message or element, in characters.
-MAX_TEXT_CHARS = 64 * 1024
-_ANSI_ESCAPE = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-Z\\-_]")
-_ILLEGAL_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
-
-
-class CaseKind(Enum):
-    """The one outcome of a synthesized test case."""
-
-    PASSED = "passed"
-    FAILURE = "failure"
-    ERROR = "error"
-    SKIPPED = "skipped"
+_COUNTS = ("tests", "failures", "errors", "skipped")
 
 
-@dataclass(frozen=True)
-class Case:
-    """A test case the runner writes for a test that wrote none (or could not run)."""
-
-    kind: CaseKind
-    message: str = ""
-    time: float = 0.0
+def xml_safe(text: str, limit: int | None = TEXT_LIMIT) -> str:
+    """:func:`~ros_isolated_test.runner.xml_text.xml_safe`, capped for a result file."""
+    return _xml_safe(text, limit)
 
 
-def xml_safe(text: str, limit: int | None = MAX_TEXT_CHARS) -> str:
-    """Text any XML 1.0 reader accepts: colour codes dropped, other illegal characters shown.
-
-    Over ``limit`` the head and tail are kept around a marked cut.
-    """
-    text = _ANSI_ESCAPE.sub("", text)
-    text = _ILLEGAL_XML.sub(lambda match: f"\\x{ord(match.group()):02x}", text)
-    if limit is not None and len(text) > limit:
-        half = limit // 2
-        cut = len(text) - 2 * half
-        text = f"{text[:half]}\n[... {cut} characters cut ...]\n{text[-half:]}"
-    return text
+def timestamp(when: float | None = None) -> str:
+    """Local time to the second, the form every reader (and our schema) accepts."""
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(when))
 
 
-def render(
-    package: str,
-    test_name: str,
-    case: Case,
-    properties: Mapping[str, str],
-) -> bytes:
-    """One suite ``<package>.<test>`` with one case, as ``<testsuites>`` bytes."""
-    suite_name = f"{package}.{test_name}"
-    root = etree.Element("testsuites")
-    suite = etree.SubElement(
-        root,
-        "testsuite",
-        name=suite_name,
-        tests="1",
-        failures=str(int(case.kind is CaseKind.FAILURE)),
-        errors=str(int(case.kind is CaseKind.ERROR)),
-        skipped=str(int(case.kind is CaseKind.SKIPPED)),
-        time=f"{case.time:.3f}",
-        timestamp=time.strftime("%Y-%m-%dT%H:%M:%S"),
-        hostname=socket.gethostname() or "localhost",
+def hostname() -> str:
+    """The machine's name; never empty (the schema requires one)."""
+    return socket.gethostname().strip() or "localhost"
+
+
+def _seconds(value: float) -> str:
+    return f"{max(value, 0.0):.3f}"
+
+
+def build(suite: Suite) -> etree._Element:
+    """The ``<testsuites>`` tree of one suite, counts recomputed from its cases."""
+    root = etree.Element("testsuites", name=xml_safe(suite.name, 1024))
+    counts = {
+        "tests": len(suite.cases),
+        "failures": suite.count(Outcome.FAILURE),
+        "errors": suite.count(Outcome.ERROR),
+        "skipped": suite.count(Outcome.SKIPPED),
+    }
+    for key in ("tests", "failures", "errors"):
+        root.set(key, str(counts[key]))
+    root.set("time", _seconds(suite.time))
+    element = etree.SubElement(root, "testsuite", name=xml_safe(suite.name, 1024))
+    for key in _COUNTS:
+        element.set(key, str(counts[key]))
+    element.set("time", _seconds(suite.time))
+    element.set("timestamp", suite.timestamp)
+    element.set("hostname", xml_safe(suite.hostname, 255) or "localhost")
+    properties = etree.SubElement(element, "properties")
+    for name, value in {**suite.properties, "runner_version": __version__}.items():
+        etree.SubElement(properties, "property", name=name, value=xml_safe(value, 4096))
+    for case in suite.cases:
+        _add_case(element, case)
+    _add_output(element, suite.system_out, suite.system_err)
+    return root
+
+
+def _add_case(parent: etree._Element, case: Case) -> None:
+    element = etree.SubElement(
+        parent,
+        "testcase",
+        classname=xml_safe(case.classname, 1024),
+        name=xml_safe(case.name, 1024),
+        time=_seconds(case.time),
     )
-    props = etree.SubElement(suite, "properties")
-    for name, value in {**properties, "runner_version": __version__}.items():
-        etree.SubElement(props, "property", name=name, value=xml_safe(value, 4096))
-    testcase = etree.SubElement(
-        suite, "testcase", classname=suite_name, name=test_name, time=f"{case.time:.3f}"
-    )
-    if case.kind is not CaseKind.PASSED:
+    if case.outcome is not Outcome.PASSED:
         message = xml_safe(case.message)
-        child = etree.SubElement(testcase, case.kind.value, message=message)
-        if message:
-            child.text = message
+        outcome = etree.SubElement(element, case.outcome.value, message=message)
+        if case.type:
+            outcome.set("type", xml_safe(case.type, 256))
+        text = xml_safe(case.text) or message
+        if text:
+            outcome.text = text
+    _add_output(element, case.system_out, case.system_err)
+
+
+def _add_output(parent: etree._Element, out: str, err: str) -> None:
+    for tag, text in (("system-out", out), ("system-err", err)):
+        safe = xml_safe(text)
+        if safe.strip():
+            etree.SubElement(parent, tag).text = safe
+
+
+def problems(root: etree._Element) -> list[str]:
+    """Why a tree is not canonical: schema errors, then counts that disagree with cases."""
+    schema = junit_schema()
+    if not schema.validate(root):
+        return [f"line {error.line}: {error.message}" for error in list(schema.error_log)]  # type: ignore[call-overload]
+    found: list[str] = []
+    for suite in root.iter("testsuite"):
+        cases = suite.findall("testcase")
+        expected = {
+            "tests": len(cases),
+            "failures": sum(1 for case in cases if case.find("failure") is not None),
+            "errors": sum(1 for case in cases if case.find("error") is not None),
+            "skipped": sum(1 for case in cases if case.find("skipped") is not None),
+        }
+        for key, value in expected.items():
+            if suite.get(key) != str(value):
+                found.append(
+                    f"suite {suite.get('name')}: {key}={suite.get(key)}, cases say {value}"
+                )
+    return found
+
+
+def render(suite: Suite) -> bytes:
+    """The canonical file's bytes; an invalid document becomes a valid one saying why."""
+    root = build(suite)
+    found = problems(root)
+    if found:
+        root = build(_internal_error(suite, found))
     return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
+
+
+def _internal_error(suite: Suite, found: list[str]) -> Suite:
+    failed = sum(1 for case in suite.cases if case.outcome.failed)
+    message = (
+        "ros-isolated-test built a result that does not match its own schema (a bug: please "
+        f"report it). The test had {len(suite.cases)} case(s), {failed} failed or errored. "
+        f"Schema problems: {'; '.join(found[:5])}"
+    )
+    case = Case(
+        classname=suite.name,
+        name="result file",
+        outcome=Outcome.ERROR,
+        message=message,
+        text=message,
+        type="InternalError",
+    )
+    return Suite(
+        name=suite.name or "ros_isolated_test.result",
+        cases=[case],
+        time=suite.time,
+        timestamp=timestamp(),
+        hostname=hostname(),
+        properties={key: value for key, value in suite.properties.items() if key and value},
+    )
 
 
 def write_atomically(path: Path, data: bytes) -> None:
@@ -117,66 +176,3 @@ def holds_exactly(path: Path, data: bytes) -> bool:
             return handle.read(len(data) + 1) == data
     except OSError:
         return False
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """What a result file written by the test itself says."""
-
-    readable: bool
-    failed: bool
-    detail: str = ""
-
-
-def _safe_parser(recover: bool = False) -> etree.XMLParser:
-    # A test's result file is written by arbitrary code: no entities, DTDs or network.
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, recover=recover)
-
-
-def read_verdict(path: Path, package: str | None = None) -> Verdict:
-    """Parse a test's own result file, tidying it in place if needed, as run_test.py does.
-
-    A ``.gtest.xml`` gets ``<package>.`` put before each classname that lacks it, so
-    results from different packages do not merge in CI reports.
-    """
-    try:
-        data = path.read_bytes()
-    except OSError as error:
-        return Verdict(readable=False, failed=True, detail=f"cannot read {path}: {error}")
-    try:
-        root = etree.fromstring(data, _safe_parser())
-        tidied = False
-    except etree.XMLSyntaxError as error:
-        text = xml_safe(data.decode("utf-8", errors="replace"), limit=None)
-        text = re.sub(r"^<\?xml[^>]*\?>", "", text.lstrip("\ufeff"))
-        try:
-            root = etree.fromstring(text.encode(), _safe_parser())
-        except etree.XMLSyntaxError:
-            return Verdict(readable=False, failed=True, detail=f"invalid XML in {path}: {error}")
-        tidied = True
-    if root is None:
-        return Verdict(readable=False, failed=True, detail=f"no XML in {path}")
-    prefixed = False
-    if package and path.name.endswith(".gtest.xml"):
-        for case in root.iter("testcase"):
-            classname = case.get("classname", "")
-            if not classname.startswith(f"{package}."):
-                case.set("classname", f"{package}.{classname}")
-                prefixed = True
-    if tidied or prefixed:
-        write_atomically(path, bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8")))
-    failed = _reports_failure(root)
-    detail = f"{path} reports failures or errors" if failed else ""
-    return Verdict(readable=True, failed=failed, detail=detail)
-
-
-def _reports_failure(root: etree._Element) -> bool:
-    """Failures by the counts or by the elements: producers get one or the other wrong."""
-    for node in root.iter("testsuites", "testsuite"):
-        for attribute in ("failures", "errors"):
-            try:
-                if int(float(node.get(attribute, "0") or "0")) > 0:
-                    return True
-            except ValueError:
-                continue
-    return any(True for _ in root.iter("failure", "error"))

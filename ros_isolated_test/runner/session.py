@@ -7,7 +7,6 @@ Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 import shlex
 import sys
@@ -21,57 +20,17 @@ from ros_isolated_test.domain_coordinator import (
     PoolExhaustedError,
     PoolSpecError,
 )
-from ros_isolated_test.runner import environment, exit_codes, results, supervisor
+from ros_isolated_test.runner import environment, exit_codes, normaliser, supervisor
 from ros_isolated_test.runner.capture import OutputCapture
+from ros_isolated_test.runner.junit_model import Outcome
 from ros_isolated_test.runner.request import Mode, RunRequest
-from ros_isolated_test.runner.results import Case, CaseKind
-
-NO_RESULT = "The test did not generate a result file."
-
-
-class _ResultFile:
-    """The request's result file through its life: placeholder, then the final word."""
-
-    def __init__(self, request: RunRequest) -> None:
-        self.request = request
-        self.path = request.result_file
-        self.properties: dict[str, str] = {"command": shlex.join(request.command)}
-        self.placeholder: bytes | None = None
-
-    def prepare(self) -> None:
-        """Drop a stale file from an earlier run (colcon never clears them) and make the folder."""
-        if self.path is None:
-            return
-        if self.path.is_dir():
-            raise IsADirectoryError(errno.EISDIR, "it is a directory", str(self.path))
-        with contextlib.suppress(FileNotFoundError):
-            self.path.unlink()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-
-    def write(self, case: Case) -> bytes | None:
-        if self.path is None:
-            return None
-        data = results.render(self.request.package, self.request.test_name, case, self.properties)
-        results.write_atomically(self.path, data)
-        return data
-
-    def write_placeholder(self) -> None:
-        """What ctest leaves behind if it kills the runner: the test did not finish."""
-        self.placeholder = self.write(Case(CaseKind.ERROR, NO_RESULT))
-
-    def untouched(self) -> bool:
-        """Whether the test left our placeholder (or nothing) in place."""
-        if self.path is None:
-            return True
-        if self.placeholder is not None and results.holds_exactly(self.path, self.placeholder):
-            return True
-        return not self.path.exists()
+from ros_isolated_test.runner.result_file import NO_RESULT, ResultFile
 
 
 def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     """Reserve, run, write results; return the exit code the caller should exit with."""
     console = console if console is not None else sys.stdout.buffer
-    result = _ResultFile(request)
+    result = ResultFile(request)
     try:
         result.prepare()
     except OSError as error:
@@ -88,23 +47,21 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
             f"cannot open output file {request.output_file}: {error.strerror}; "
             "choose a writable file path"
         )
-        return _not_run(result, console, message, CaseKind.ERROR, exit_codes.USAGE)
+        return _not_run(result, console, message, Outcome.ERROR, exit_codes.USAGE)
     with output as handle:
         capture = OutputCapture(console, handle)
         return _run(request, result, capture, console)
 
 
-def _run(
-    request: RunRequest, result: _ResultFile, capture: OutputCapture, console: BinaryIO
-) -> int:
+def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, console: BinaryIO) -> int:
     if request.skip_test:
         capture.note("skipping the test (--skip-test)")
-        result.write(Case(CaseKind.SKIPPED, "Test skipped by developer (SKIP_TEST)"))
+        result.write([result.case(Outcome.SKIPPED, "Test skipped by developer (SKIP_TEST)")])
         return exit_codes.PASSED
     try:
         policy = environment.decide(request.env, env_origin=request.env_origin)
     except environment.RefusedError as refusal:
-        return _not_run(result, console, str(refusal), CaseKind.FAILURE, exit_codes.USAGE)
+        return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     result.write_placeholder()
     try:
         with _domain(policy, request) as domain_id:
@@ -125,9 +82,9 @@ def _run(
                 request.command, env, capture, request.timeout, request.kill_grace
             )
     except PoolSpecError as error:
-        return _not_run(result, console, str(error), CaseKind.ERROR, exit_codes.USAGE)
+        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
     except (PoolExhaustedError, LockDirError) as error:
-        return _not_run(result, console, str(error), CaseKind.ERROR, exit_codes.NO_DOMAIN)
+        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
     return _conclude(request, result, capture, outcome)
 
 
@@ -142,42 +99,62 @@ def _domain(policy: environment.Policy, request: RunRequest) -> Iterator[int | N
 
 def _conclude(
     request: RunRequest,
-    result: _ResultFile,
+    result: ResultFile,
     capture: OutputCapture,
     outcome: supervisor.Outcome,
 ) -> int:
     """Turn how the test ended into the result file and the exit code."""
     code, reason = _code_and_reason(request, outcome)
     result.properties["exit"] = reason
+    if outcome.returncode is not None and outcome.returncode >= 0:
+        result.properties["exit_code"] = str(outcome.returncode)
+    if outcome.signal is not None:
+        result.properties["signal"] = exit_codes.signal_name(outcome.signal)
     result.properties["duration"] = f"{outcome.duration:.3f}"
     if outcome.start_error is not None:
         capture.note(f"invocation failed: {outcome.start_error}")
     capture.note(f"the test {reason}")
     if result.path is None:
         return code
+    duration = outcome.duration
+    skip_code = (
+        request.skip_return_code is not None and outcome.returncode == request.skip_return_code
+    )
     if code == 0 and request.generate_result_on_success:
-        result.write(Case(CaseKind.PASSED, time=outcome.duration))
+        result.write([result.case(Outcome.PASSED, duration=duration)], duration)
         return code
     if result.untouched():
         output = capture.tail_text()
-        if request.skip_return_code is not None and outcome.returncode == request.skip_return_code:
+        if skip_code:
             capture.note(f"return code {outcome.returncode} means skipped (--skip-return-code)")
             message = f"Test skipped: it returned {outcome.returncode}."
-            result.write(Case(CaseKind.SKIPPED, message, outcome.duration))
+            result.write([result.case(Outcome.SKIPPED, message, duration)], duration)
             return code
         if code == 0:
-            result.write(Case(CaseKind.ERROR, f"{NO_RESULT}\n\n{output}", outcome.duration))
+            message = f"{NO_RESULT}\n\n{output}"
+            result.write([result.case(Outcome.ERROR, message, duration)], duration)
             capture.note(f"{NO_RESULT} Failing it (write one, or use --generate-result-on-success)")
             return exit_codes.FAILED
-        kind = CaseKind.ERROR if outcome.start_error is not None else CaseKind.FAILURE
+        kind = Outcome.ERROR if outcome.start_error is not None else Outcome.FAILURE
         detail = f"The test {reason}."
         if request.mode is Mode.AMENT:
             detail = f"{NO_RESULT} {detail}"
-        result.write(Case(kind, f"{detail}\n\n{output}", outcome.duration))
+        result.write([result.case(kind, f"{detail}\n\n{output}", duration)], duration)
         return code
-    verdict = results.read_verdict(result.path, request.package_name)
-    if not verdict.readable or verdict.failed:
-        capture.note(verdict.detail)
+    cases = result.adopt()
+    for problem in result.problems:
+        capture.note(f"result file {result.path}: {problem}")
+    abnormal = outcome.signal is not None or outcome.timed_out
+    if abnormal or (code != 0 and not skip_code and not any(c.outcome.failed for c in cases)):
+        cases.append(
+            normaliser.exit_case(
+                result.suite_name, reason, all_passed=not any(c.outcome.failed for c in cases)
+            )
+        )
+    failed = any(case.outcome.failed for case in cases)
+    result.write(cases, duration, capture.tail_text() if failed or code else "")
+    if failed:
+        capture.note(f"the result file {result.path} reports failures or errors")
         return code or exit_codes.FAILED
     return code
 
@@ -210,14 +187,14 @@ def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[
 def report_usage_error(message: str, result_file: Path | None, prog: str) -> int:
     """Arguments that cannot be understood: say so, and still leave a result file."""
     request = RunRequest(command=(), mode=Mode.AMENT, result_file=result_file)
-    result = _ResultFile(request)
+    result = ResultFile(request)
     try:
         result.prepare()
         return _not_run(
             result,
             sys.stdout.buffer,
             f"{prog}: {message}; see {prog} --help",
-            CaseKind.ERROR,
+            Outcome.ERROR,
             exit_codes.USAGE,
         )
     except OSError:
@@ -225,12 +202,10 @@ def report_usage_error(message: str, result_file: Path | None, prog: str) -> int
         return exit_codes.USAGE
 
 
-def _not_run(
-    result: _ResultFile, console: BinaryIO, message: str, kind: CaseKind, code: int
-) -> int:
+def _not_run(result: ResultFile, console: BinaryIO, message: str, kind: Outcome, code: int) -> int:
     _error(console, message)
     result.properties["exit"] = "not run"
-    result.write(Case(kind, message))
+    result.write([result.case(kind, message)])
     return code
 
 

@@ -1,0 +1,255 @@
+"""Turning what a test left behind into canonical test cases.
+
+Each producer gets something wrong for some reader (xunit-formats.md, section 7);
+the fixes are generic where they can be and keyed to a producer's shape where not:
+gtest's nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases,
+launch_testing's text-only-in-message, xmlrunner's timestamped suite names, ctest's
+missing ``errors`` and empty output, gtest and ctest disabled tests shown as passed.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable
+
+from ros_isolated_test.runner.bounded_text import bounded
+from ros_isolated_test.runner.junit_model import Case, Outcome
+from ros_isolated_test.runner.xunit_reader import (
+    TEXT_LIMIT,
+    RawCase,
+    RawOutcome,
+    ReadResult,
+)
+
+_XMLRUNNER_SUFFIX = re.compile(r"-[0-9]{14}$")
+_SETUP_CLASS = re.compile(r"^(setUpClass|tearDownClass|setUpModule|tearDownModule) \((.+)\)$")
+_PRIMARY = {"failure": Outcome.FAILURE, "error": Outcome.ERROR, "skipped": Outcome.SKIPPED}
+
+
+def prefixed(package: str | None, classname: str) -> str:
+    """``<package>.`` exactly once in front of ``classname``."""
+    if not package or classname == package or classname.startswith(f"{package}."):
+        return classname
+    return f"{package}.{classname}"
+
+
+def seconds(value: str | None) -> float:
+    """A producer's time as seconds: ``"0."`` and ``"1,234.5"`` read, nonsense reads as 0."""
+    if not value:
+        return 0.0
+    try:
+        number = float(value.strip().replace(",", ""))
+    except ValueError:
+        return 0.0
+    return number if math.isfinite(number) and number >= 0 else 0.0
+
+
+def cases_from(read: ReadResult, package: str | None, fallback: str) -> list[Case]:
+    """Every case the file holds, fixed and merged; damage becomes an error case.
+
+    ``fallback`` names cases whose producer gave no class name (the test's name).
+    """
+    cases = [_case(raw, package, fallback, index) for index, raw in enumerate(read.cases, 1)]
+    if read.dropped:
+        cases.append(_dropped(read, package, fallback))
+    if read.problems:
+        cases.append(damage_case(read, package, fallback))
+    unreported = _claimed_failures(read) - _failed_elements(read)
+    if unreported > 0:
+        message = (
+            f"The result file counts {unreported} more failure(s) or error(s) than its "
+            "test cases show; the producer reported them nowhere else."
+        )
+        cases.append(
+            Case(
+                classname=prefixed(package, fallback),
+                name="unreported failures",
+                outcome=Outcome.ERROR,
+                message=message,
+                text=message,
+                type="CountMismatch",
+            )
+        )
+    return merge_duplicates(cases)
+
+
+def _count(attrs: dict[str, str], *names: str) -> int:
+    total = 0
+    for name in names:
+        try:
+            total += max(int(float(attrs.get(name, "0") or "0")), 0)
+        except ValueError:
+            continue
+    return total
+
+
+def _claimed_failures(read: ReadResult) -> int:
+    """What the producer's own counts say failed: the root's or the suites' total."""
+    root = _count(read.root_attrs, "failures", "errors") if read.is_xunit else 0
+    suites = sum(_count(suite.attrs, "failures", "errors") for suite in read.suites)
+    return max(root, suites)
+
+
+def _failed_elements(read: ReadResult) -> int:
+    failed = sum(
+        1 for raw in read.cases if any(item.tag in ("failure", "error") for item in raw.outcomes)
+    )
+    return failed + read.dropped["failure"] + read.dropped["error"]
+
+
+def damage_case(read: ReadResult, package: str | None, fallback: str) -> Case:
+    """What was wrong with the file, as an error case, so no reader misses it."""
+    kept = len(read.cases)
+    detail = "; ".join(read.problems)
+    message = f"Invalid result file {read.path.name}, not fully readable: {detail}."
+    if kept:
+        message += f" {kept} test case(s) before the damage were kept."
+    return Case(
+        classname=prefixed(package, fallback),
+        name="result file",
+        outcome=Outcome.ERROR,
+        message=message,
+        text=message,
+        type="BrokenResultFile",
+    )
+
+
+def _dropped(read: ReadResult, package: str | None, fallback: str) -> Case:
+    total = sum(read.dropped.values())
+    failed = read.dropped["failure"] + read.dropped["error"]
+    worst = max((_PRIMARY.get(kind, Outcome.PASSED) for kind in read.dropped), key=_rank)
+    message = f"{total} further test case(s) were not kept, to keep the file small: " + ", ".join(
+        f"{count} {kind}" for kind, count in sorted(read.dropped.items())
+    )
+    return Case(
+        classname=prefixed(package, fallback),
+        name="further test cases",
+        outcome=worst if failed or worst is Outcome.SKIPPED else Outcome.PASSED,
+        message=message if worst is not Outcome.PASSED else "",
+        text=message if worst is not Outcome.PASSED else "",
+        system_out=message if worst is Outcome.PASSED else "",
+    )
+
+
+def _rank(outcome: Outcome) -> int:
+    return outcome.rank
+
+
+def _case(raw: RawCase, package: str | None, fallback: str, index: int) -> Case:
+    attrs = raw.attrs
+    name = attrs.get("name", "").strip()
+    classname = attrs.get("classname", "").strip()
+    suite = _XMLRUNNER_SUFFIX.sub("", raw.suite.strip())
+    setup = _SETUP_CLASS.match(name)
+    if not classname and setup:
+        # xmlrunner reports a setUpClass error with the class only inside the name.
+        classname = _XMLRUNNER_SUFFIX.sub("", setup.group(2))
+    if not name and not classname and raw.complete and raw.outcomes:
+        # gtest's ad-hoc failures: an environment or suite set-up/tear-down failed.
+        name = (
+            "global environment set-up or tear-down"
+            if suite == "NonTestSuiteFailure"
+            else "suite set-up or tear-down"
+        )
+    classname = classname or suite or fallback
+    name = name or f"unnamed test case {index}"
+    case = Case(
+        classname=prefixed(package, classname),
+        name=name,
+        time=seconds(attrs.get("time")),
+        system_out=raw.system_out if raw.system_out.strip() else "",
+        system_err=raw.system_err if raw.system_err.strip() else "",
+    )
+    _set_outcome(case, raw)
+    if not raw.complete and not case.outcome.failed:
+        case.outcome = Outcome.ERROR
+        case.message = case.text = "The result file ends inside this test case."
+        case.type = "BrokenResultFile"
+    return case
+
+
+def _set_outcome(case: Case, raw: RawCase) -> None:
+    primary = [item for item in raw.outcomes if item.tag in _PRIMARY]
+    notes = [item for item in raw.outcomes if item.tag not in _PRIMARY]
+    status = raw.attrs.get("status", "")
+    if not primary and (status == "disabled" or raw.attrs.get("result") == "suppressed"):
+        # gtest DISABLED_ and ctest DISABLED tests: xunit-viewer shows them as passed.
+        case.outcome = Outcome.SKIPPED
+        case.message = case.text = "disabled"
+        return
+    if primary:
+        case.outcome = max((_PRIMARY[item.tag] for item in primary), key=_rank)
+        ordered = sorted(primary, key=lambda item: -_PRIMARY[item.tag].rank)
+        case.type = ordered[0].attrs.get("type", "")
+        case.message = _join(_message(item) for item in ordered)
+        case.text = _join(_text(item) for item in ordered)
+        if case.outcome.failed:
+            case.message = case.message or case.text or "failed (no message was given)"
+            case.text = case.text or case.message
+        elif case.message and not case.text:
+            case.text = case.message
+    if notes:
+        # Surefire's rerun/flaky elements: earlier attempts, not the outcome.
+        attempts = _join(f"{item.tag}: {_message(item) or _text(item)}" for item in notes)
+        case.system_out = _join([case.system_out, attempts])
+
+
+def _message(item: RawOutcome) -> str:
+    return item.attrs.get("message", "").strip()
+
+
+def _text(item: RawOutcome) -> str:
+    return item.text.strip()
+
+
+def _join(parts: Iterable[str]) -> str:
+    kept: list[str] = []
+    for part in parts:
+        if part and part not in kept:
+            kept.append(part)
+    return bounded("\n\n".join(kept), TEXT_LIMIT)
+
+
+def merge_duplicates(cases: list[Case]) -> list[Case]:
+    """One case per (classname, name): GitLab keeps only the first, xunit-viewer merges.
+
+    pytest writes a failing test with a teardown error twice, and each rerun attempt
+    once; the merged case has the worst outcome and every message.
+    """
+    merged: dict[tuple[str, str], Case] = {}
+    for case in cases:
+        key = (case.classname, case.name)
+        first = merged.get(key)
+        if first is None:
+            merged[key] = case
+            continue
+        if case.outcome.rank > first.outcome.rank:
+            first.outcome, first.type = case.outcome, case.type
+            first.message = _join([case.message, first.message])
+            first.text = _join([case.text, first.text])
+        elif case.outcome.rank == first.outcome.rank or case.outcome.failed:
+            first.message = _join([first.message, case.message])
+            first.text = _join([first.text, case.text])
+        first.time = max(first.time, case.time)
+        first.system_out = _join([first.system_out, case.system_out])
+        first.system_err = _join([first.system_err, case.system_err])
+    return list(merged.values())
+
+
+def exit_case(classname: str, reason: str, all_passed: bool) -> Case:
+    """The test's exit, as a failed case, when it contradicts or adds to the cases.
+
+    A test that exits 1 while every case it reported passed, or one that dies of a
+    signal or a timeout after writing its file, is not a passing test.
+    """
+    message = f"The test process {reason}"
+    message += ", although every test case it reported passed." if all_passed else "."
+    return Case(
+        classname=classname,
+        name="test process exit",
+        outcome=Outcome.FAILURE,
+        message=message,
+        text=message,
+        type="ExitStatus",
+    )

@@ -1,0 +1,113 @@
+"""One test's result file through its life: stale file gone, placeholder, final word.
+
+The final word is always a canonical file at the result path: the test's own file
+normalised (the original kept beside it as ``<name>.orig``), or one written for a
+test that wrote none.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import shlex
+import shutil
+import time
+from pathlib import Path
+
+from ros_isolated_test.runner import normaliser, results, xunit_reader
+from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
+from ros_isolated_test.runner.request import RunRequest
+
+NO_RESULT = "The test did not generate a result file."
+ORIGINAL_SUFFIX = ".orig"
+
+
+class ResultFile:
+    """The request's result file; every method is a no-op when none was asked for."""
+
+    def __init__(self, request: RunRequest) -> None:
+        self.request = request
+        self.path = request.result_file
+        self.started = time.time()
+        self.properties: dict[str, str] = {"command": shlex.join(request.command)}
+        self.placeholder: bytes | None = None
+        #: What was wrong with the test's own file, for the console.
+        self.problems: list[str] = []
+
+    @property
+    def original(self) -> Path | None:
+        """Where the test's own file is kept once its canonical form replaces it."""
+        return None if self.path is None else self.path.with_name(self.path.name + ORIGINAL_SUFFIX)
+
+    def prepare(self) -> None:
+        """Drop stale files of an earlier run (colcon never clears them), make the folder."""
+        if self.path is None:
+            return
+        if self.path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "it is a directory", str(self.path))
+        for stale in (self.path, self.original):
+            assert stale is not None
+            with contextlib.suppress(FileNotFoundError):
+                if stale.is_dir() and not stale.is_symlink():
+                    shutil.rmtree(stale)
+                else:
+                    stale.unlink()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+
+    def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
+        """The test as one case, for a test that wrote no result of its own."""
+        return Case(
+            classname=self.suite_name,
+            name=self.request.test_name,
+            time=duration,
+            outcome=outcome,
+            message=message,
+            text=message,
+        )
+
+    @property
+    def suite_name(self) -> str:
+        """``<package>.<test name>``: unique across a build, as CI reports need."""
+        return f"{self.request.package}.{self.request.test_name}"
+
+    def write(self, cases: list[Case], duration: float = 0.0, output: str = "") -> bytes | None:
+        """Write the canonical file holding ``cases``; returns its bytes."""
+        if self.path is None:
+            return None
+        suite = Suite(
+            name=self.suite_name,
+            cases=cases,
+            time=duration,
+            timestamp=results.timestamp(self.started),
+            hostname=results.hostname(),
+            properties=dict(self.properties),
+            system_out=output,
+        )
+        data = results.render(suite)
+        results.write_atomically(self.path, data)
+        return data
+
+    def write_placeholder(self) -> None:
+        """What ctest leaves behind if it kills the runner: the test did not finish."""
+        self.placeholder = self.write([self.case(Outcome.ERROR, NO_RESULT)])
+
+    def untouched(self) -> bool:
+        """Whether the test left our placeholder (or nothing) in place."""
+        if self.path is None:
+            return True
+        if self.placeholder is not None and results.holds_exactly(self.path, self.placeholder):
+            return True
+        return not os.path.lexists(self.path)
+
+    def adopt(self) -> list[Case]:
+        """The test's own file as canonical cases; the original is moved aside, not lost."""
+        assert self.path is not None and self.original is not None
+        read = xunit_reader.read(self.path)
+        self.problems = read.problems + read.repairs
+        if read.repairs:
+            self.properties["result_file_repairs"] = "; ".join(read.repairs)
+        if os.path.lexists(self.path):
+            os.replace(self.path, self.original)
+            self.properties["original_result_file"] = self.original.name
+        return normaliser.cases_from(read, self.request.package, self.request.test_name)
