@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Installs everything the demo and the test suite need, into .venv beside this script's
-# project: system build tools (cmake, a C++ compiler) from Debian when missing, then
-# ros-isolated-test with real ROS 2 Jazzy, ament_cmake and colcon from PyPI.
+# Installs everything the demo and the test suite need: system build tools (cmake, a C++
+# compiler, googletest, node) from Debian when missing, xunit-viewer from npm into
+# node_modules, then ros-isolated-test with real ROS 2 Jazzy, ament_cmake and colcon
+# from PyPI into .venv.
 # Safe to run again: it only installs again when pyproject.toml changed.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -17,12 +18,24 @@ missing=()
 for tool in cmake ctest make g++ unshare; do
   command -v "$tool" >/dev/null 2>&1 || missing+=("$tool")
 done
+# googletest builds a real gtest binary in the tests; node and npm run xunit-viewer.
+[[ -f /usr/include/gtest/gtest.h ]] || missing+=(libgtest-dev)
+command -v npm >/dev/null 2>&1 || missing+=(npm)
 if ((${#missing[@]})); then
   echo "setup: installing system packages for: ${missing[*]}"
   sudo=""
   [[ $(id -u) -ne 0 ]] && sudo=sudo
   $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq cmake make g++ util-linux >/dev/null
+  packages=(cmake make g++ util-linux libgtest-dev)
+  command -v npm >/dev/null 2>&1 || packages+=(nodejs npm)
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${packages[@]}" >/dev/null
+fi
+
+npm_stamp=node_modules/.installed-$(cat package.json package-lock.json | sha256sum | cut -c1-16)
+if [[ ! -f $npm_stamp ]]; then
+  echo "setup: installing xunit-viewer (npm) into node_modules"
+  npm ci --no-audit --no-fund --loglevel=error
+  touch "$npm_stamp"
 fi
 
 stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
@@ -30,9 +43,14 @@ if [[ ! -f $stamp ]]; then
   echo "setup: installing ros-isolated-test, ROS 2 Jazzy, ament_cmake and colcon into .venv (about a minute)"
   # Reuse an existing .venv: pip only adds what changed, and a running test keeps working.
   [[ -x .venv/bin/python ]] || "$python" -m venv .venv
-  # pip's notes about local index folders that do not exist here are noise: keep real errors.
-  .venv/bin/python -m pip install -q --upgrade pip 2>&1 | { grep -v '^WARNING: Location' || true; }
-  .venv/bin/python -m pip install -q -e ".[ros,dev]" 2>&1 | { grep -v '^WARNING: Location' || true; }
+  # pip's output goes to a log, shown only when the install fails.
+  log=.venv/install.log
+  if ! { .venv/bin/python -m pip install -q --upgrade pip &&
+         .venv/bin/python -m pip install -q -e ".[ros,dev]"; } >"$log" 2>&1; then
+    grep -v '^WARNING: Location' "$log" >&2
+    echo "setup: pip install failed (full log: $log)" >&2
+    exit 1
+  fi
   .venv/bin/ros-isolated-test --help >/dev/null
   rm -f .venv/.installed-*
   touch "$stamp"
