@@ -169,6 +169,74 @@ def status(as_json: bool) -> None:
         )
 
 
+@cli.command()
+@click.argument(
+    "paths",
+    nargs=-1,
+    type=click.Path(exists=True, path_type=Path),
+)
+@click.option("--verbose", "-v", is_flag=True, help="List each failure with its message.")
+@click.option("--json", "as_json", is_flag=True, help="Print the same as JSON.")
+def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
+    """Summarise the xUnit result files under PATHS (default: build).
+
+    Prints each file's counts and the total, like `colcon test-result --all`, counted
+    from the test cases themselves. Reads canonical files and raw gtest, pytest,
+    launch_testing, unittest-xml-reporting and ctest files alike; a broken file counts
+    as an error. Exits 1 when anything failed or errored.
+    """
+    from ros_isolated_test.runner import report as reporting
+
+    if not paths:
+        default = Path("build")
+        if not default.exists():
+            raise click.UsageError("no PATHS given and no 'build' folder here; name a folder")
+        paths = (default,)
+    reports = [
+        found
+        for path in reporting.result_files(paths)
+        if (found := reporting.report_file(path)) is not None
+    ]
+    totals = {
+        key: sum(getattr(item, key) for item in reports)
+        for key in ("tests", "errors", "failures", "skipped")
+    }
+    if as_json:
+        rows = [
+            {
+                "path": str(item.path),
+                "tests": item.tests,
+                "errors": item.errors,
+                "failures": item.failures,
+                "skipped": item.skipped,
+                "failed_cases": [
+                    {
+                        "classname": case.classname,
+                        "name": case.name,
+                        "outcome": case.outcome.value,
+                        "message": case.message,
+                    }
+                    for case in item.failed_cases
+                ],
+            }
+            for item in reports
+        ]
+        click.echo(json.dumps({"files": rows, "total": totals}, indent=2))
+    else:
+        for item in reports:
+            counts = reporting.summary_line(item.tests, item.errors, item.failures, item.skipped)
+            click.echo(f"{item.path}: {counts}")
+            if verbose:
+                for case in item.failed_cases:
+                    click.echo(f"- {case.classname} {case.name} ({case.outcome.value})")
+                    for line in (case.message or "(no message)").splitlines()[:20]:
+                        click.echo(f"  {line}")
+        click.echo("")
+        click.echo(f"Summary: {reporting.summary_line(**totals)}")
+    if totals["errors"] or totals["failures"]:
+        sys.exit(1)
+
+
 def main() -> None:
     """Console-script entry point."""
     cli()

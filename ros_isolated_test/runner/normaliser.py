@@ -51,6 +51,7 @@ def cases_from(read: ReadResult, package: str | None, fallback: str) -> list[Cas
     ``fallback`` names cases whose producer gave no class name (the test's name).
     """
     cases = [_case(raw, package, fallback, index) for index, raw in enumerate(read.cases, 1)]
+    _qualify_repeats_across_suites(cases, [raw.suite for raw in read.cases])
     if read.dropped:
         cases.append(_dropped(read, package, fallback))
     if read.problems:
@@ -96,6 +97,18 @@ def _failed_elements(read: ReadResult) -> int:
         1 for raw in read.cases if any(item.tag in ("failure", "error") for item in raw.outcomes)
     )
     return failed + read.dropped["failure"] + read.dropped["error"]
+
+
+def _qualify_repeats_across_suites(cases: list[Case], suites: list[str]) -> None:
+    """Name a case repeated in another suite after that suite, so it is kept, not merged.
+
+    Such a repeat is another run (launch_testing's parametrised runs), not a duplicate.
+    """
+    owner: dict[tuple[str, str], str] = {}
+    for case, suite in zip(cases, suites, strict=False):
+        first = owner.setdefault((case.classname, case.name), suite)
+        if first != suite:
+            case.name = f"{case.name} [{suite}]"
 
 
 def damage_case(read: ReadResult, package: str | None, fallback: str) -> Case:
