@@ -20,7 +20,7 @@ from ros_isolated_test.domain_coordinator import (
 )
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
 from ros_isolated_test.runner import session
-from ros_isolated_test.runner.request import Mode, RunRequest
+from ros_isolated_test.runner.request import Mode, RunRequest, test_name_of
 
 EXIT_CODES_HELP = """\b
 Exit codes:
@@ -234,6 +234,35 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
         click.echo("")
         click.echo(f"Summary: {reporting.summary_line(**totals)}")
     if totals["errors"] or totals["failures"]:
+        sys.exit(1)
+
+
+@cli.command()
+@click.argument("source", type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--output",
+    "-o",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the canonical file here instead of printing it.",
+)
+@click.option("--package-name", required=True, help="Package: suite name and classname prefix.")
+@click.option("--test-name", help="Test name in the suite name (default: SOURCE's stem).")
+def normalise(source: Path, output: Path | None, package_name: str, test_name: str | None) -> None:
+    """Turn one result file into the canonical form of schemas/junit.xsd.
+
+    Reads gtest, pytest, launch_testing, unittest-xml-reporting and ctest files (and
+    broken ones), as the runner does after every test; for tests that did not run
+    through it. Exits 1 when the result reports failures or errors, like `report`.
+    """
+    from ros_isolated_test.runner import result_file, results
+
+    name = test_name or test_name_of(source)
+    data, failed = result_file.normalise_file(source, package_name, name)
+    if output is None:
+        click.echo(data.decode("utf-8"), nl=False)
+    else:
+        results.write_atomically(output, data)
+    if failed:
         sys.exit(1)
 
 

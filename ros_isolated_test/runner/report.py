@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ros_isolated_test.runner import normaliser, xunit_reader
 from ros_isolated_test.runner.junit_model import Case, Outcome
+from ros_isolated_test.runner.request import test_name_of
 
 
 @dataclass
@@ -50,7 +51,7 @@ def report_file(path: Path) -> FileReport | None:
     read = xunit_reader.read(path)
     if read.root_tag is not None and not read.is_xunit:
         return None
-    cases = normaliser.cases_from(read, None, path.name.split(".")[0] or path.name)
+    cases = normaliser.cases_from(read, None, test_name_of(path))
     report = FileReport(path=path, tests=len(cases))
     for case in cases:
         if case.outcome is Outcome.ERROR:

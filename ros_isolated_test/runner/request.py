@@ -16,6 +16,15 @@ class Mode(Enum):
     AMENT = "ament"
 
 
+def test_name_of(result_file: Path) -> str:
+    """The test a result file belongs to: its name without the producer's suffix."""
+    name = result_file.name
+    for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
 @dataclass(frozen=True)
 class EnvAssignment:
     """One ``--env`` (``append=False``) or ``--append-env`` (``append=True``) argument."""
@@ -47,11 +56,7 @@ class RunRequest:
     def test_name(self) -> str:
         """The result file's stem, the name ament gives the test; else the command's name."""
         if self.result_file is not None:
-            name = self.result_file.name
-            for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
-                if name.endswith(suffix):
-                    return name[: -len(suffix)] or name
-            return name
+            return test_name_of(self.result_file)
         return Path(self.command[0]).name if self.command else "test"
 
     @property

@@ -103,11 +103,36 @@ class ResultFile:
     def adopt(self) -> list[Case]:
         """The test's own file as canonical cases; the original is moved aside, not lost."""
         assert self.path is not None and self.original is not None
-        read = xunit_reader.read(self.path)
+        cases, read = read_cases(self.path, self.request.package, self.request.test_name)
         self.problems = read.problems + read.repairs
         if read.repairs:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)
         if os.path.lexists(self.path):
             os.replace(self.path, self.original)
             self.properties["original_result_file"] = self.original.name
-        return normaliser.cases_from(read, self.request.package, self.request.test_name)
+        return cases
+
+
+def read_cases(
+    path: Path, package: str | None, test_name: str
+) -> tuple[list[Case], xunit_reader.ReadResult]:
+    """The canonical cases of any result file, and what reading it found."""
+    read = xunit_reader.read(path)
+    return normaliser.cases_from(read, package, test_name), read
+
+
+def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, bool]:
+    """A producer's result file as canonical bytes, and whether anything in it failed."""
+    cases, read = read_cases(path, package, test_name)
+    properties = {"original_result_file": path.name}
+    if read.repairs:
+        properties["result_file_repairs"] = "; ".join(read.repairs)
+    suite = Suite(
+        name=f"{package}.{test_name}",
+        cases=cases,
+        time=sum(case.time for case in cases),
+        timestamp=results.timestamp(),
+        hostname=results.hostname(),
+        properties=properties,
+    )
+    return results.render(suite), suite.failed

@@ -249,6 +249,10 @@ def _worse(current: str, tag: str) -> str:
     return kind if _RANK.get(kind, 0) > _RANK.get(current, 0) else current
 
 
+class _NotAResultFile(Exception):
+    """The prolog never ends: nothing after it is fed to the parser."""
+
+
 class _Sanitiser:
     """Bytes in, clean UTF-8 out: decoded, illegal characters shown, the prolog defused."""
 
@@ -314,8 +318,10 @@ class _Sanitiser:
         self.prolog += text
         body = _DOCTYPE.sub(self._doctype_found, _DECLARATION.sub("", self.prolog, count=1))
         start = _ROOT_START.search(body)
-        if start is None and not final and len(self.prolog) < MAX_PROLOG_CHARS:
-            return ""
+        if start is None and not final:
+            if len(self.prolog) < MAX_PROLOG_CHARS:
+                return ""
+            raise _NotAResultFile(f"no root element in the first {MAX_PROLOG_CHARS // 1024} KiB")
         self.in_prolog = False
         self.prolog = ""
         return body
@@ -352,7 +358,9 @@ def read(path: Path) -> ReadResult:
     builder = _Builder(result)
     parser = etree.XMLParser(
         target=cast("etree.ParserTarget", builder),
-        resolve_entities=False,
+        # Safe only because the sanitiser removed every DOCTYPE: no entity is defined
+        # but the five predefined ones, which attribute values need resolved.
+        resolve_entities=True,
         no_network=True,
         load_dtd=False,
         huge_tree=True,
@@ -378,6 +386,10 @@ def read(path: Path) -> ReadResult:
                 parser.feed(sanitiser.feed(chunk, final))
                 if final:
                     parser.close()
+            except _NotAResultFile as error:
+                result.problems.append(f"not XML ({error})")
+                stopped = True
+                break
             except etree.XMLSyntaxError as error:
                 if not (builder.root_closed and "Extra content" in str(error)):
                     result.problems.append(_describe(error, builder, result))
