@@ -16,6 +16,7 @@ from ros_isolated_test.domain_coordinator.reservation import (
     PoolExhaustedError,
     Reservation,
 )
+from ros_isolated_test.domain_coordinator.squatters import Squatter
 from ros_isolated_test.domain_coordinator.status import HeldDomain, held_domains
 
 __all__ = [
@@ -27,6 +28,7 @@ __all__ = [
     "PoolExhaustedError",
     "PoolSpecError",
     "Reservation",
+    "Squatter",
     "ensure_lock_dir",
     "held_domains",
     "lock_dir_from_env",

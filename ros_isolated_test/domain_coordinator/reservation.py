@@ -3,35 +3,62 @@
 The kernel drops a flock when the last descriptor of its open file closes, so an ID
 comes free however its holder dies (exit, crash, SIGKILL): no stale-lock cleanup, no
 timeouts, no daemon. The descriptor is close-on-exec: the test does not inherit it.
+
+Every holder also binds the ID's TCP port, and that port is the final arbiter: when a
+lock file was planted by another user (a symlink, a file we may not open) a runner
+falls back to a lock file of its own for that ID and still cannot collide.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import socket
 import stat
-from collections.abc import Iterator, Sequence
+import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from filelock import lock_descriptor
 
-from ros_isolated_test.domain_coordinator import holder, port_guard
-from ros_isolated_test.domain_coordinator.lock_dir import ensure_lock_dir, lock_dir_from_env
+from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator.lock_dir import (
+    LockDirError,
+    ensure_lock_dir,
+    lock_dir_from_env,
+)
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
+from ros_isolated_test.domain_coordinator.queue import Queue
 
 #: Lock files are shared by all users: each must be able to open and flock them.
 LOCK_FILE_MODE = 0o666
+#: Errors that say the directory cannot take files at all: not an ID's problem.
+_DIRECTORY_ERRORS = frozenset({errno.ENOSPC, errno.EROFS, errno.EDQUOT})
 
 
 class PoolExhaustedError(RuntimeError):
-    """Every ID in the pool is held; the message says by whom and what to do."""
+    """No ID became free in time; the message says who holds them and what to do."""
+
+
+class _Unusable(Exception):
+    """Something other than our lock file is at the path (planted by someone)."""
 
 
 def lock_path(lock_dir: Path, domain_id: int) -> Path:
     """The file whose flock is the reservation of ``domain_id``."""
     return lock_dir / f"domain-{domain_id}.lock"
+
+
+def own_lock_path(lock_dir: Path, domain_id: int) -> Path:
+    """The lock file of the current user for the ID, used when the shared one was planted."""
+    return lock_dir / f"domain-{domain_id}.uid{os.getuid()}.lock"
+
+
+def release_stamp(lock_dir: Path, domain_id: int) -> Path:
+    """A file whose mtime says when this user last released the ID (least recently used)."""
+    return lock_dir / f"domain-{domain_id}.uid{os.getuid()}.released"
 
 
 @dataclass
@@ -41,7 +68,8 @@ class Reservation:
     domain_id: int
     lock_fd: int
     port: socket.socket
-    record: Path
+    record: Path | None
+    lock_dir: Path
     released: bool = field(default=False, init=False)
 
     def release(self) -> None:
@@ -49,17 +77,25 @@ class Reservation:
         if self.released:
             return
         self.released = True
-        holder.remove_record(self.record)
+        if self.record is not None:
+            holder.remove_record(self.record)
+        with contextlib.suppress(OSError):
+            stamp = release_stamp(self.lock_dir, self.domain_id)
+            fd = os.open(stamp, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+            try:
+                os.utime(fd)
+            finally:
+                os.close(fd)
         self.port.close()
         os.close(self.lock_fd)
 
 
-def _open_lock_file(path: Path) -> int | None:
-    """A read-only descriptor of the ID's lock file, created shared if missing.
+def _open_lock_file(path: Path) -> int:
+    """A read-only descriptor of a lock file, created shared if missing.
 
     Read-only is enough for flock, so a lock file another user created can be used
-    whatever its mode lets us write. Never follows a symlink; anything but a regular
-    file at the path (planted by someone, in a world-writable directory) means None.
+    whatever its mode lets us write. Never follows a symlink. Raises :class:`_Unusable`
+    for anything planted at the path, :class:`LockDirError` when no file can be made.
     """
     flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
     try:
@@ -67,29 +103,26 @@ def _open_lock_file(path: Path) -> int | None:
     except FileExistsError:
         try:
             fd = os.open(path, flags)
-        except OSError:
-            return None
-    except OSError:
-        return None
+        except OSError as error:
+            raise _Unusable(f"{path}: {error.strerror}") from None
+    except OSError as error:
+        if error.errno in _DIRECTORY_ERRORS or error.errno == errno.EACCES:
+            raise LockDirError(
+                f"cannot create lock file {path}: {error.strerror}; free space or grant "
+                f"write access to {path.parent}, or point ROS_ISOLATED_TEST_LOCK_DIR elsewhere"
+            ) from None
+        raise _Unusable(f"{path}: {error.strerror}") from None
     else:
         # The umask cut the mode; every user must be able to open the file.
         with contextlib.suppress(OSError):
             os.fchmod(fd, LOCK_FILE_MODE)
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         os.close(fd)
-        return None
+        raise _Unusable(f"{path} is not a regular file")
     return fd
 
 
-def try_lock(lock_dir: Path, domain_id: int) -> int | None:
-    """One non-blocking attempt at the ID's lock: the held descriptor, or None.
-
-    None also when the lock path is unusable (a directory or symlink planted there):
-    such an ID is skipped rather than trusted.
-    """
-    fd = _open_lock_file(lock_path(lock_dir, domain_id))
-    if fd is None:
-        return None
+def _flock(fd: int) -> int | None:
     try:
         if lock_descriptor(fd, blocking=False):
             return fd
@@ -99,6 +132,52 @@ def try_lock(lock_dir: Path, domain_id: int) -> int | None:
     return None
 
 
+def try_lock(lock_dir: Path, domain_id: int) -> int | None:
+    """One non-blocking attempt at the ID's lock: the held descriptor, or None if busy.
+
+    A planted shared lock file is replaced by this user's own lock file for the ID; the
+    port every holder binds keeps two holders of one ID apart whichever file they use.
+    """
+    try:
+        return _flock(_open_lock_file(lock_path(lock_dir, domain_id)))
+    except _Unusable:
+        try:
+            return _flock(_open_lock_file(own_lock_path(lock_dir, domain_id)))
+        except _Unusable:
+            return None
+
+
+def probe_lock(lock_dir: Path, domain_id: int) -> bool | None:
+    """Whether the shared lock of the ID is held right now (None: no usable lock file)."""
+    path = lock_path(lock_dir, domain_id)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+    except OSError:
+        return None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        return None
+    locked = _flock(fd)
+    if locked is None:
+        return True
+    os.close(locked)
+    return False
+
+
+def _released_at(lock_dir: Path) -> dict[int, float]:
+    """When each ID was last released by anyone, from one directory listing."""
+    released: dict[int, float] = {}
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(lock_dir):
+            name = entry.name
+            if name.startswith("domain-") and name.endswith(".released"):
+                with contextlib.suppress(ValueError, OSError):
+                    domain_id = int(name[len("domain-") :].split(".", 1)[0])
+                    mtime = entry.stat(follow_symlinks=False).st_mtime
+                    released[domain_id] = max(released.get(domain_id, 0.0), mtime)
+    return released
+
+
 class DomainCoordinator:
     """Hands out domain IDs from a pool, machine-wide, through a shared lock directory."""
 
@@ -106,14 +185,26 @@ class DomainCoordinator:
         self.lock_dir = lock_dir if lock_dir is not None else lock_dir_from_env()
         self.pool = tuple(pool) if pool is not None else pool_from_env()
 
-    def try_reserve(self, command: Sequence[str]) -> Reservation | None:
-        """The first free ID of the pool, held; None when all are taken.
+    def candidates(self) -> list[int]:
+        """The pool, least recently released first, without IDs live processes use.
 
-        An ID counts as free only when both its lock and its TCP port can be taken, so
-        runners of upstream's ``domain_coordinator`` on this machine are respected.
+        Least recently used: discovery data a finished test left behind has the most
+        time to expire before its domain is used again.
+        """
+        busy = squatters.scan(set(self.pool))
+        released = _released_at(self.lock_dir)
+        free = [domain_id for domain_id in self.pool if domain_id not in busy]
+        return sorted(free, key=lambda domain_id: released.get(domain_id, 0.0))
+
+    def try_reserve(self, command: Sequence[str]) -> Reservation | None:
+        """A free ID of the pool, held; None when all are taken.
+
+        An ID counts as free only when its lock and its TCP port can both be taken (so
+        upstream's ``domain_coordinator`` on this machine is respected) and no live
+        process carries it in its environment.
         """
         ensure_lock_dir(self.lock_dir)
-        for domain_id in self.pool:
+        for domain_id in self.candidates():
             lock_fd = try_lock(self.lock_dir, domain_id)
             if lock_fd is None:
                 continue
@@ -121,26 +212,80 @@ class DomainCoordinator:
             if port is None:
                 os.close(lock_fd)
                 continue
-            try:
-                record = holder.write_record(self.lock_dir, domain_id, command)
-            except BaseException:
+            if squatters.scan({domain_id}):
+                # A process took up the ID between the scan and the lock.
                 port.close()
                 os.close(lock_fd)
-                raise
-            return Reservation(domain_id, lock_fd, port, record)
+                continue
+            try:
+                record: Path | None = holder.write_record(self.lock_dir, domain_id, command)
+            except OSError:
+                record = None  # status shows "no holder record"; the reservation stands
+            return Reservation(domain_id, lock_fd, port, record, self.lock_dir)
         return None
 
+    def acquire(
+        self,
+        command: Sequence[str],
+        wait_timeout: float = 0.0,
+        on_wait: Callable[[str], None] | None = None,
+    ) -> Reservation:
+        """Reserve an ID, waiting first come, first served while the pool is full."""
+        queue = Queue(self.lock_dir)
+        if not queue.waiting():
+            reservation = self.try_reserve(command)
+            if reservation is not None:
+                return reservation
+        if wait_timeout <= 0:
+            raise PoolExhaustedError(self._exhausted("", 0.0))
+        start = time.monotonic()
+        told = 0.0
+        with queue.ticket() as ticket:
+            while True:
+                waited = time.monotonic() - start
+                ahead = ticket.ahead()
+                if ahead == 0:
+                    reservation = self.try_reserve(command)
+                    if reservation is not None:
+                        return reservation
+                if waited >= wait_timeout:
+                    raise PoolExhaustedError(self._exhausted("waited", waited))
+                if on_wait is not None and (told == 0.0 or waited - told >= 10.0):
+                    told = waited or 0.001
+                    on_wait(self._waiting_message(ahead, waited, wait_timeout))
+                time.sleep(0.1 if ahead == 0 else 0.3)
+
     @contextlib.contextmanager
-    def reserve(self, command: Sequence[str]) -> Iterator[Reservation]:
-        """Hold a free ID for the ``with`` block; :class:`PoolExhaustedError` if there is none."""
-        reservation = self.try_reserve(command)
-        if reservation is None:
-            raise PoolExhaustedError(
-                f"all {len(self.pool)} domain IDs of the pool are held "
-                f"(see `ros-isolated-test status`); run fewer tests at once (ctest -j), "
-                "or widen the pool with ROS_ISOLATED_TEST_DOMAINS, e.g. '1-101,215-232'"
-            )
+    def reserve(
+        self,
+        command: Sequence[str],
+        wait_timeout: float = 0.0,
+        on_wait: Callable[[str], None] | None = None,
+    ) -> Iterator[Reservation]:
+        """Hold an ID for the ``with`` block (see :meth:`acquire`)."""
+        reservation = self.acquire(command, wait_timeout, on_wait)
         try:
             yield reservation
         finally:
             reservation.release()
+
+    def _holders(self) -> str:
+        from ros_isolated_test.domain_coordinator.status import describe_holders
+
+        return describe_holders(self.lock_dir, self.pool)
+
+    def _waiting_message(self, ahead: int, waited: float, limit: float) -> str:
+        return (
+            f"waiting for a free ROS_DOMAIN_ID ({waited:.0f} s of {limit:.0f} s, "
+            f"{ahead} runner(s) ahead): all {len(self.pool)} IDs of the pool are in use: "
+            f"{self._holders()}"
+        )
+
+    def _exhausted(self, how: str, waited: float) -> str:
+        spent = f"after waiting {waited:.0f} s, " if how else ""
+        return (
+            f"{spent}no free ROS_DOMAIN_ID: all {len(self.pool)} IDs of the pool are in use "
+            f"({self._holders()}); run fewer tests at once (ctest -j), widen the pool with "
+            "ROS_ISOLATED_TEST_DOMAINS (e.g. '1-101,215-232'), or wait longer with "
+            "--wait-timeout / ROS_ISOLATED_TEST_WAIT_TIMEOUT"
+        )

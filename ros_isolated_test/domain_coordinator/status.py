@@ -1,4 +1,9 @@
-"""What ``ros-isolated-test status`` reports: every ID of the pool that is in use."""
+"""What ``ros-isolated-test status`` reports: every domain ID in use on this machine.
+
+An ID is in use when a runner holds its lock, when something binds its TCP port
+(upstream's ``domain_coordinator``, another program), or when a live process carries
+it in ROS_DOMAIN_ID (a test that outlived its runner, a shell's export): a squatter.
+"""
 
 from __future__ import annotations
 
@@ -8,28 +13,27 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, port_guard
-from ros_isolated_test.domain_coordinator.reservation import lock_path, try_lock
+from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator.reservation import probe_lock
+
+_LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
 
 
 @dataclass(frozen=True)
 class HeldDomain:
-    """One ID in use: by one of our runners (``via="lock"``) or only its port (``"port"``)."""
+    """One ID in use: ``via`` is ``lock`` (a runner), ``port`` or ``environment``."""
 
     domain_id: int
     via: str
     holder: holder.Holder | None
 
 
-_LOCK_NAME = re.compile(r"domain-([0-9]+)\.lock")
-
-
 def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
-    """Every ID held in the lock directory (any pool), plus the pool's IDs held by port.
+    """Every ID in use: locks in the directory (any pool), ports and squatters of the pool.
 
     Runners of other users may use other pools, so every lock file counts, not only
-    the caller's pool. A probe takes a free lock for an instant; a runner that looks
-    at that moment just moves on to the next ID, so probing never makes a test fail.
+    the caller's pool. Probing a lock takes it for an instant when it is free; a runner
+    that looks at that moment moves on to the next ID, so probing never fails a test.
     """
     candidates = set(pool)
     with contextlib.suppress(OSError):
@@ -38,14 +42,45 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
             if match:
                 candidates.add(int(match.group(1)))
     held: list[HeldDomain] = []
+    found = squatters.scan(candidates)
     for domain_id in sorted(candidates):
-        if lock_path(lock_dir, domain_id).exists():
-            lock_fd = try_lock(lock_dir, domain_id)
-            if lock_fd is None:
-                records = holder.read_records(lock_dir, domain_id)
-                held.append(HeldDomain(domain_id, "lock", records[0] if records else None))
-                continue
-            os.close(lock_fd)
-        if port_guard.port_is_taken(domain_id):
+        if probe_lock(lock_dir, domain_id):
+            records = holder.read_records(lock_dir, domain_id)
+            held.append(HeldDomain(domain_id, "lock", records[0] if records else None))
+        elif port_guard.port_is_taken(domain_id):
             held.append(HeldDomain(domain_id, "port", None))
+        for squatter in found.get(domain_id, ()):
+            held.append(
+                HeldDomain(
+                    domain_id,
+                    "environment",
+                    holder.Holder(
+                        domain_id=domain_id,
+                        pid=squatter.pid,
+                        user=squatter.user,
+                        command=squatter.command,
+                        started=squatter.started,
+                        host="",
+                    ),
+                )
+            )
     return held
+
+
+def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> str:
+    """A short line naming who uses the pool, for waiting and exhaustion messages."""
+    wanted = set(pool)
+    parts: list[str] = []
+    items = [item for item in held_domains(lock_dir, pool) if item.domain_id in wanted]
+    for item in items[:limit]:
+        if item.holder is not None:
+            kind = "squatter " if item.via == "environment" else ""
+            parts.append(
+                f"{item.domain_id}: {kind}pid {item.holder.pid} ({item.holder.user}) "
+                f"{item.holder.command[:60]}"
+            )
+        else:
+            parts.append(f"{item.domain_id}: {'port taken' if item.via == 'port' else item.via}")
+    if len(items) > limit:
+        parts.append(f"and {len(items) - limit} more")
+    return "; ".join(parts) or "see ros-isolated-test status"

@@ -13,7 +13,12 @@ from pathlib import Path
 from typing import NoReturn
 
 from ros_isolated_test.runner import exit_codes, session
-from ros_isolated_test.runner.request import EnvAssignment, Mode, RunRequest
+from ros_isolated_test.runner.request import (
+    EnvAssignment,
+    Mode,
+    RunRequest,
+    wait_timeout_from_env,
+)
 
 PROG = "run_test_isolated.py"
 
@@ -127,9 +132,14 @@ def parse(argv: Sequence[str]) -> RunRequest:
         env += _assignments(args.append_env, "--append-env", append=True)
     except UsageError as error:
         raise UsageError(str(error), args.result_file) from None
+    try:
+        wait_timeout = wait_timeout_from_env()
+    except ValueError as error:
+        raise UsageError(str(error), args.result_file) from None
     return RunRequest(
         command=tuple(command),
         mode=Mode.AMENT,
+        wait_timeout=wait_timeout,
         result_file=args.result_file,
         package_name=args.package_name,
         output_file=args.output_file,

@@ -20,7 +20,13 @@ from ros_isolated_test.domain_coordinator import (
 )
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
 from ros_isolated_test.runner import session
-from ros_isolated_test.runner.request import Mode, RunRequest, test_name_of
+from ros_isolated_test.runner.request import (
+    DEFAULT_WAIT_TIMEOUT,
+    WAIT_TIMEOUT_ENV,
+    Mode,
+    RunRequest,
+    test_name_of,
+)
 
 EXIT_CODES_HELP = """\b
 Exit codes:
@@ -84,6 +90,16 @@ def cli() -> None:
     metavar="SECONDS",
     help="Time between SIGTERM and SIGKILL when stopping the test.",
 )
+@click.option(
+    "--wait-timeout",
+    type=click.FloatRange(min=0),
+    default=DEFAULT_WAIT_TIMEOUT,
+    show_default=True,
+    envvar=WAIT_TIMEOUT_ENV,
+    metavar="SECONDS",
+    help=f"When every ID is in use, wait this long for one (first come, first served; "
+    f"env {WAIT_TIMEOUT_ENV}); 0 fails at once.",
+)
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
     junit_xml: Path | None,
@@ -91,13 +107,16 @@ def run(
     package_name: str | None,
     timeout: float | None,
     kill_grace: float,
+    wait_timeout: float,
     command: tuple[str, ...],
 ) -> None:
     """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
 
     Put the command after `--`. Its stdout and stderr are streamed as produced. A
     ROS_DOMAIN_ID already set in the environment is refused: unset it, or set
-    DISABLE_ROS_ISOLATION=1 to run without isolation.
+    DISABLE_ROS_ISOLATION=1 to run without isolation. Every process the command
+    starts is stopped when it ends, before the ID is released; SIGINT, SIGTERM and
+    SIGHUP to the runner are passed on to the test.
     """
     request = RunRequest(
         command=command,
@@ -108,6 +127,7 @@ def run(
         generate_result_on_success=True,
         timeout=timeout,
         kill_grace=kill_grace,
+        wait_timeout=wait_timeout,
     )
     sys.exit(session.run(request))
 

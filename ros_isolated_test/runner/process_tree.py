@@ -8,43 +8,69 @@ from __future__ import annotations
 
 import contextlib
 import os
+from dataclasses import dataclass
 
 
-def _parents() -> dict[int, int]:
-    """PID -> parent PID of every process we can see."""
-    parents: dict[int, int] = {}
+@dataclass(frozen=True)
+class Process:
+    """One process as /proc shows it."""
+
+    pid: int
+    ppid: int
+    pgid: int
+    state: str
+    name: str
+
+
+def _read(pid: str) -> Process | None:
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as handle:
+            data = handle.read()
+    except OSError:
+        return None
+    # The command name may hold spaces and parentheses: fields follow the last ')'.
+    close = data.rfind(b")")
+    fields = data[close + 2 :].split()
+    if len(fields) < 3:
+        return None
+    name = data[data.find(b"(") + 1 : close].decode("utf-8", "replace")
+    return Process(int(pid), int(fields[1]), int(fields[2]), fields[0].decode(), name)
+
+
+def processes() -> list[Process]:
+    """Every process we can see."""
+    found: list[Process] = []
     with contextlib.suppress(OSError):
         for entry in os.scandir("/proc"):
-            if not entry.name.isdigit():
-                continue
-            try:
-                with open(f"/proc/{entry.name}/stat", "rb") as handle:
-                    data = handle.read()
-            except OSError:
-                continue
-            # The command name may hold spaces and parentheses: fields follow the last ')'.
-            fields = data[data.rfind(b")") + 2 :].split()
-            if len(fields) > 1:
-                parents[int(entry.name)] = int(fields[1])
-    return parents
-
-
-def descendants(pid: int) -> list[int]:
-    """Every living descendant of ``pid``, parents before children."""
-    children: dict[int, list[int]] = {}
-    for child, parent in _parents().items():
-        children.setdefault(parent, []).append(child)
-    found: list[int] = []
-    queue = list(children.get(pid, ()))
-    while queue:
-        current = queue.pop(0)
-        found.append(current)
-        queue.extend(children.get(current, ()))
+            if entry.name.isdigit() and (process := _read(entry.name)) is not None:
+                found.append(process)
     return found
 
 
-def signal_tree(pid: int, signum: int) -> None:
-    """Send ``signum`` to ``pid`` and every descendant; gone processes are skipped."""
-    for target in [pid, *descendants(pid)]:
+def descendants(pid: int, living_only: bool = True) -> list[Process]:
+    """Every descendant of ``pid``, parents before children; zombies left out by default."""
+    children: dict[int, list[Process]] = {}
+    for process in processes():
+        children.setdefault(process.ppid, []).append(process)
+    found: list[Process] = []
+    queue = list(children.get(pid, ()))
+    while queue:
+        current = queue.pop(0)
+        if not living_only or current.state != "Z":
+            found.append(current)
+        queue.extend(children.get(current.pid, ()))
+    return found
+
+
+def signal_all(targets: list[Process], signum: int) -> None:
+    """Send ``signum`` to each target; processes already gone are skipped."""
+    for target in targets:
         with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.kill(target, signum)
+            os.kill(target.pid, signum)
+
+
+def signal_tree(pid: int, signum: int) -> None:
+    """Send ``signum`` to ``pid`` and every descendant."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.kill(pid, signum)
+    signal_all(descendants(pid), signum)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -14,6 +16,27 @@ class Mode(Enum):
     SHELL = "shell"
     #: ctest RUNNER (run_test.py's contract): a command that cannot start counts as code 1.
     AMENT = "ament"
+
+
+WAIT_TIMEOUT_ENV = "ROS_ISOLATED_TEST_WAIT_TIMEOUT"
+DEFAULT_WAIT_TIMEOUT = 600.0
+
+
+def wait_timeout_from_env(environ: Mapping[str, str] | None = None) -> float:
+    """``ROS_ISOLATED_TEST_WAIT_TIMEOUT`` in seconds (default 10 minutes); ValueError if bad."""
+    environ = os.environ if environ is None else environ
+    text = environ.get(WAIT_TIMEOUT_ENV, "").strip()
+    if not text:
+        return DEFAULT_WAIT_TIMEOUT
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value >= 0 or value == float("inf"):
+        raise ValueError(
+            f"{WAIT_TIMEOUT_ENV}={text!r} is not a number of seconds; set e.g. 600, or unset it"
+        )
+    return value
 
 
 def test_name_of(result_file: Path) -> str:
@@ -49,6 +72,8 @@ class RunRequest:
     generate_result_on_success: bool = False
     timeout: float | None = None
     kill_grace: float = 5.0
+    #: How long to wait for a free ID when the pool is full, in seconds.
+    wait_timeout: float = DEFAULT_WAIT_TIMEOUT
     #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
     env_origin: str = "--env"
 

@@ -90,7 +90,12 @@ class ResultFile:
 
     def write_placeholder(self) -> None:
         """What ctest leaves behind if it kills the runner: the test did not finish."""
-        self.placeholder = self.write([self.case(Outcome.ERROR, NO_RESULT)])
+        message = (
+            f"{NO_RESULT} If this is all there is, the runner was killed before the test "
+            "ended, as a ctest TIMEOUT does (SIGKILL, no chance to write anything else): "
+            "the test most likely timed out."
+        )
+        self.placeholder = self.write([self.case(Outcome.ERROR, message)])
 
     def untouched(self) -> bool:
         """Whether the test left our placeholder (or nothing) in place."""

@@ -9,9 +9,12 @@ from __future__ import annotations
 import contextlib
 import os
 import shlex
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from pathlib import Path
+from types import FrameType
 from typing import BinaryIO
 
 from ros_isolated_test.domain_coordinator import (
@@ -64,7 +67,7 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
         return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     result.write_placeholder()
     try:
-        with _domain(policy, request) as domain_id:
+        with _interruptible(), _domain(policy, request, capture) as domain_id:
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
                 result.properties["ros_domain_id"] = str(domain_id)
@@ -85,16 +88,59 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
     except (PoolExhaustedError, LockDirError) as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
+    except Interrupted as interruption:
+        name = exit_codes.signal_name(interruption.signum)
+        message = f"interrupted by {name} before the test started (it never ran)"
+        result.properties["signal_received"] = name
+        return _not_run(
+            result, console, message, Outcome.ERROR, exit_codes.for_signal(interruption.signum)
+        )
+    for leftover in outcome.leftovers:
+        capture.note(f"stopped process {leftover}, left running by the test")
+    if outcome.leftovers:
+        result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
     return _conclude(request, result, capture, outcome)
 
 
+class Interrupted(Exception):
+    """A signal ended the run before the test started (while waiting for an ID)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
 @contextlib.contextmanager
-def _domain(policy: environment.Policy, request: RunRequest) -> Iterator[int | None]:
+def _interruptible() -> Iterator[None]:
+    """Until the supervisor takes over, SIGINT/SIGTERM/SIGHUP end the run cleanly.
+
+    Needed for a runner queued for an ID (and for PID 1, which has no default action).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, _frame: FrameType | None) -> None:
+        raise Interrupted(signum)
+
+    previous = {signum: signal.signal(signum, stop) for signum in supervisor.FORWARDED_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+@contextlib.contextmanager
+def _domain(
+    policy: environment.Policy, request: RunRequest, capture: OutputCapture
+) -> Iterator[int | None]:
     if not policy.isolate:
         yield None
         return
-    with DomainCoordinator().reserve(request.command) as reservation:
-        yield reservation.domain_id
+    coordinator = DomainCoordinator()
+    with coordinator.reserve(request.command, request.wait_timeout, capture.note) as held:
+        yield held.domain_id
 
 
 def _conclude(
@@ -144,7 +190,9 @@ def _conclude(
     cases = result.adopt()
     for problem in result.problems:
         capture.note(f"result file {result.path}: {problem}")
-    abnormal = outcome.signal is not None or outcome.timed_out
+    abnormal = (
+        outcome.signal is not None or outcome.timed_out or outcome.received_signal is not None
+    )
     if abnormal or (code != 0 and not skip_code and not any(c.outcome.failed for c in cases)):
         cases.append(
             normaliser.exit_case(
@@ -167,6 +215,17 @@ def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[
         if isinstance(error, FileNotFoundError):
             return exit_codes.NOT_FOUND, f"could not be started: {error}"
         return exit_codes.NOT_EXECUTABLE, f"could not be started: {error}"
+    if outcome.received_signal is not None:
+        received = exit_codes.signal_name(outcome.received_signal)
+        ended = (
+            f"was killed by {exit_codes.signal_name(outcome.signal)}"
+            if outcome.signal is not None
+            else f"exited with code {outcome.returncode}"
+        )
+        return (
+            exit_codes.for_signal(outcome.received_signal),
+            f"was interrupted: the runner received {received}, passed it on, and the test {ended}",
+        )
     if outcome.timed_out:
         limit = f"{request.timeout:g}" if request.timeout is not None else "?"
         return (
@@ -176,10 +235,7 @@ def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[
     signum = outcome.signal
     if signum is not None:
         name = exit_codes.signal_name(signum)
-        how = f"was killed by {name} (signal {signum})"
-        if outcome.received_signal is not None:
-            how += f" after the runner received {exit_codes.signal_name(outcome.received_signal)}"
-        return exit_codes.for_signal(signum), how
+        return exit_codes.for_signal(signum), f"was killed by {name} (signal {signum})"
     assert outcome.returncode is not None
     return outcome.returncode, f"exited with code {outcome.returncode}"
 

@@ -1,8 +1,11 @@
-"""Process supervision: start the test, pump its output, enforce the timeout, report how it ended.
+"""Process supervision: start the test, pump its output, end its whole tree, report how it ended.
 
-Runs like a shell runs a foreground job: the test stays in the runner's process group
-(so a terminal's Ctrl-C reaches it directly and it may read a terminal's stdin),
-SIGINT is left to the test, SIGTERM and SIGHUP are passed on to it.
+The test stays in the runner's process group, as a shell's foreground job does, so it
+may read a terminal's stdin without being stopped by SIGTTIN and a terminal's Ctrl-C
+reaches it directly. The runner is a child subreaper: every process the test starts
+stays in its tree, and none outlives the run. When the test's main process ends, for
+any reason, what is left of the tree gets SIGTERM, then SIGKILL after a grace period,
+and only then does the caller release the domain ID.
 """
 
 from __future__ import annotations
@@ -14,17 +17,19 @@ import signal
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from types import FrameType
 
-from ros_isolated_test.runner import process_tree
+from ros_isolated_test.runner import process_tree, reaper
 from ros_isolated_test.runner.capture import OutputCapture
 
 CHUNK_BYTES = 64 * 1024
 #: How long to keep draining output after the test exited, while bytes keep coming.
 DRAIN_IDLE_SECONDS = 0.2
-FORWARDED_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+POLL_SECONDS = 0.2
+#: Signals that end a run: passed on to the test, then the same cleanup as a timeout.
+FORWARDED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 @dataclass(frozen=True)
@@ -35,8 +40,10 @@ class Outcome:
     duration: float
     timed_out: bool = False
     start_error: OSError | None = None
-    #: A signal the runner received and passed on (SIGTERM from ctest, a container stop).
+    #: A signal the runner received and passed on (Ctrl-C, SIGTERM from a container stop).
     received_signal: int | None = None
+    #: Processes of the test still alive after its main process ended, then stopped.
+    leftovers: tuple[str, ...] = field(default_factory=tuple)
 
     @property
     def signal(self) -> int | None:
@@ -46,6 +53,45 @@ class Outcome:
         return None
 
 
+class _Signals:
+    """Signal handlers for the test's lifetime: pass the signal on, remember it."""
+
+    def __init__(self, process: subprocess.Popen[bytes]) -> None:
+        self.process = process
+        self.received: int | None = None
+        self.at: float | None = None
+        self._previous: dict[int, object] = {}
+
+    def __enter__(self) -> _Signals:
+        if threading.current_thread() is threading.main_thread():
+            for signum in FORWARDED_SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._forward)
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)  # type: ignore[arg-type]
+
+    def _forward(self, signum: int, _frame: FrameType | None) -> None:
+        if self.received is None:
+            self.received, self.at = signum, time.monotonic()
+        targets = process_tree.descendants(os.getpid())
+        if signum == signal.SIGINT and _from_terminal():
+            # The terminal already sent it to our process group: only processes that
+            # left the group (setsid daemons) still need it, and only once.
+            group = os.getpgrp()
+            targets = [target for target in targets if target.pgid != group]
+        process_tree.signal_all(targets, signum)
+
+
+def _from_terminal() -> bool:
+    """Whether our group is a terminal's foreground group (so Ctrl-C reached all of it)."""
+    for fd in (0, 1, 2):
+        with contextlib.suppress(OSError):
+            return os.tcgetpgrp(fd) == os.getpgrp()
+    return False
+
+
 def run(
     command: Sequence[str],
     env: Mapping[str, str],
@@ -53,7 +99,8 @@ def run(
     timeout: float | None = None,
     kill_grace: float = 5.0,
 ) -> Outcome:
-    """Run ``command`` to its end, streaming its merged stdout and stderr into ``capture``."""
+    """Run ``command`` to its end and its tree's end, streaming its output into ``capture``."""
+    reaper.become_subreaper()
     start = time.monotonic()
     try:
         process = subprocess.Popen(
@@ -61,18 +108,17 @@ def run(
         )
     except OSError as error:
         return Outcome(returncode=None, duration=time.monotonic() - start, start_error=error)
-    received: list[int] = []
-    restore = _forward_signals(process, received)
-    try:
-        timed_out = _pump(process, capture, start, timeout, kill_grace)
+    with _Signals(process) as signals:
+        timed_out = _pump(process, capture, start, timeout, kill_grace, signals)
         returncode = process.wait()
-    finally:
-        restore()
+        leftovers = _end_leftovers(kill_grace)
+        _drain(process, capture)
     return Outcome(
         returncode=returncode,
         duration=time.monotonic() - start,
         timed_out=timed_out,
-        received_signal=received[0] if received else None,
+        received_signal=signals.received,
+        leftovers=leftovers,
     )
 
 
@@ -82,11 +128,14 @@ def _pump(
     start: float,
     timeout: float | None,
     kill_grace: float,
+    signals: _Signals,
 ) -> bool:
-    """Copy output and enforce the timeout until the test has exited and its output is done.
+    """Copy output until the test exited and its output is done; enforce the timeout.
 
     Output is done when the pipe closes, or when the test has exited and the pipe has
     gone quiet: a leftover background process holding the pipe must not hold the runner.
+    A timeout (or a signal the runner passed on) gives the test ``kill_grace`` seconds
+    after SIGTERM before SIGKILL.
     """
     assert process.stdout is not None
     fd = process.stdout.fileno()
@@ -103,13 +152,15 @@ def _pump(
                 timed_out = True
                 _signal(process, signal.SIGTERM)
                 kill_at = now + kill_grace
+            if signals.at is not None and kill_at is None and not timed_out:
+                kill_at = signals.at + kill_grace
             if kill_at is not None and now >= kill_at:
                 _signal(process, signal.SIGKILL)
-                kill_at = None
+            reaper.reap_orphans(keep=process.pid)
             exited = process.poll() is not None
             if exited and not pipe_open:
                 break
-            wait = DRAIN_IDLE_SECONDS if exited else 0.5
+            wait = DRAIN_IDLE_SECONDS if exited else POLL_SECONDS
             for limit in (None if timed_out else deadline, kill_at):
                 if limit is not None:
                     wait = min(wait, max(0.0, limit - now))
@@ -130,7 +181,6 @@ def _pump(
             else:
                 pipe_open = False
                 selector.unregister(fd)
-    process.stdout.close()
     return timed_out
 
 
@@ -140,21 +190,37 @@ def _signal(process: subprocess.Popen[bytes], signum: int) -> None:
         process_tree.signal_tree(process.pid, signum)
 
 
-def _forward_signals(process: subprocess.Popen[bytes], received: list[int]) -> Callable[[], None]:
-    """Install handlers for the test's lifetime; return the function that restores them."""
-    if threading.current_thread() is not threading.main_thread():
-        return lambda: None
+def _end_leftovers(grace: float) -> tuple[str, ...]:
+    """SIGTERM what is left of the test's tree, SIGKILL it after ``grace``; reap it all.
 
-    def forward(signum: int, _frame: FrameType | None) -> None:
-        received.append(signum)
-        _signal(process, signum)
+    Returns a description of each process that had to be stopped.
+    """
+    me = os.getpid()
+    leftovers = process_tree.descendants(me)
+    if not leftovers:
+        reaper.reap_orphans()
+        return ()
+    process_tree.signal_all(leftovers, signal.SIGTERM)
+    deadline = time.monotonic() + grace
+    while time.monotonic() < deadline:
+        reaper.reap_orphans()
+        if not process_tree.descendants(me):
+            break
+        time.sleep(0.05)
+    else:
+        process_tree.signal_all(process_tree.descendants(me), signal.SIGKILL)
+        while process_tree.descendants(me) and time.monotonic() < deadline + 5:
+            reaper.reap_orphans()
+            time.sleep(0.02)
+    reaper.reap_orphans()
+    return tuple(f"{item.pid} ({item.name})" for item in leftovers)
 
-    previous = {sig: signal.signal(sig, forward) for sig in FORWARDED_SIGNALS}
-    # Like a shell waiting for its foreground job: Ctrl-C is the test's to handle.
-    previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-    def restore() -> None:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-
-    return restore
+def _drain(process: subprocess.Popen[bytes], capture: OutputCapture) -> None:
+    """Take what the stopped leftovers wrote, without waiting; then close the pipe."""
+    assert process.stdout is not None
+    fd = process.stdout.fileno()
+    with contextlib.suppress(OSError, ValueError):
+        while chunk := os.read(fd, CHUNK_BYTES):
+            capture.feed(chunk)
+    process.stdout.close()

@@ -1,0 +1,94 @@
+"""First come, first served among runners waiting for a domain ID.
+
+Each waiter holds a flock on a ticket file named after its arrival time; a runner
+may take an ID only when no live ticket is older than its own. A waiter that dies
+leaves its ticket unlocked, and the next runner to look removes or ignores it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from filelock import lock_descriptor
+
+from ros_isolated_test.domain_coordinator.lock_dir import ensure_lock_dir
+
+QUEUE_DIR = "queue"
+
+
+class Ticket:
+    """A runner's place in the queue, held until it gets an ID or gives up."""
+
+    def __init__(self, queue: Queue, name: str, fd: int) -> None:
+        self.queue = queue
+        self.name = name
+        self.fd = fd
+
+    def ahead(self) -> int:
+        """Live tickets older than this one."""
+        return sum(1 for name in self.queue.live_tickets() if name < self.name)
+
+
+class Queue:
+    """The waiting runners of one lock directory."""
+
+    def __init__(self, lock_dir: Path) -> None:
+        self.path = lock_dir / QUEUE_DIR
+
+    def live_tickets(self) -> list[str]:
+        """Names of the tickets whose waiter is alive; dead ones are removed if we can."""
+        live: list[str] = []
+        with contextlib.suppress(OSError):
+            for entry in os.scandir(self.path):
+                if not entry.name.endswith(".ticket"):
+                    continue
+                if self._held(Path(entry.path)):
+                    live.append(entry.name)
+                else:
+                    with contextlib.suppress(OSError):
+                        os.unlink(entry.path)
+        return sorted(live)
+
+    def waiting(self) -> bool:
+        """Whether anyone waits: then a newcomer queues too, instead of jumping ahead."""
+        return bool(self.live_tickets())
+
+    @staticmethod
+    def _held(path: Path) -> bool:
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+        except OSError:
+            return False
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                return False
+            # Taking the lock means nobody holds it: its waiter is gone.
+            return not lock_descriptor(fd, blocking=False)
+        except OSError:
+            return False
+        finally:
+            os.close(fd)
+
+    @contextlib.contextmanager
+    def ticket(self) -> Iterator[Ticket]:
+        """Take a place at the end of the queue for the ``with`` block."""
+        ensure_lock_dir(self.path)
+        name = f"{time.time_ns():020d}-{os.getpid()}.ticket"
+        path = self.path / name
+        fd = os.open(
+            path, os.O_RDONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644
+        )
+        try:
+            with contextlib.suppress(OSError):
+                os.fchmod(fd, 0o644)  # others must open it to see that it is held
+            lock_descriptor(fd, blocking=True)
+            yield Ticket(self, name, fd)
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+            os.close(fd)

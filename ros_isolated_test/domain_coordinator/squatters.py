@@ -1,0 +1,108 @@
+"""Processes that use a domain ID without holding it: escaped tests, a shell's export.
+
+A test process can outlive its runner (a runner killed with SIGKILL from outside ctest)
+or a ROS process can be started by other tools with ROS_DOMAIN_ID set. Either one
+still talks on that domain, so the coordinator does not hand the ID out while any live
+process it can inspect carries ``ROS_DOMAIN_ID=<id>`` in its environment.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pwd
+import re
+import time
+from dataclasses import dataclass
+
+_VARIABLE = b"ROS_DOMAIN_ID="
+_LEADING_NUMBER = re.compile(r"\s*(0[xX][0-9a-fA-F]+|[0-9]+)")
+
+
+@dataclass(frozen=True)
+class Squatter:
+    """A live process with ROS_DOMAIN_ID in its environment."""
+
+    pid: int
+    domain_id: int
+    user: str
+    command: str
+    started: float
+
+
+def domain_value(text: str) -> int | None:
+    """The domain ROS reads from a ROS_DOMAIN_ID value (``0x10`` is 16, ``5abc`` is 5)."""
+    match = _LEADING_NUMBER.match(text)
+    if match is None:
+        return None
+    number = match.group(1)
+    with contextlib.suppress(ValueError):
+        if number.lower().startswith("0x"):
+            return int(number, 16)
+        if len(number) > 1 and number.startswith("0"):
+            return int(number, 8)
+        return int(number, 10)
+    return None
+
+
+def _boot_time() -> float:
+    with contextlib.suppress(OSError, ValueError), open("/proc/stat", "rb") as handle:
+        for line in handle:
+            if line.startswith(b"btime "):
+                return float(line.split()[1])
+    return 0.0
+
+
+def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
+    """Every inspectable live process using a domain (of ``domains``, if given).
+
+    One pass over /proc; environments of other users' processes are unreadable
+    unless we are root, and are skipped.
+    """
+    found: dict[int, list[Squatter]] = {}
+    me = os.getpid()
+    try:
+        entries = [entry.name for entry in os.scandir("/proc") if entry.name.isdigit()]
+    except OSError:
+        return found
+    boot: float | None = None
+    ticks = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    for name in entries:
+        pid = int(name)
+        if pid == me:
+            continue
+        try:
+            with open(f"/proc/{name}/environ", "rb") as handle:
+                environ = handle.read()
+        except OSError:
+            continue
+        start = environ.find(_VARIABLE)
+        while start > 0 and environ[start - 1] != 0:
+            start = environ.find(_VARIABLE, start + 1)
+        if start < 0:
+            continue
+        end = environ.find(b"\0", start)
+        value = environ[start + len(_VARIABLE) : end if end >= 0 else None]
+        domain = domain_value(value.decode("ascii", "replace"))
+        if domain is None or (domains is not None and domain not in domains):
+            continue
+        if boot is None:
+            boot = _boot_time()
+        found.setdefault(domain, []).append(_describe(name, domain, boot, ticks))
+    return found
+
+
+def _describe(pid: str, domain: int, boot: float, ticks: int) -> Squatter:
+    user, command, started = "?", "?", 0.0
+    with contextlib.suppress(OSError, KeyError):
+        user = pwd.getpwuid(os.stat(f"/proc/{pid}").st_uid).pw_name
+    with contextlib.suppress(OSError):
+        with open(f"/proc/{pid}/cmdline", "rb") as handle:
+            raw = handle.read().rstrip(b"\0")
+        command = raw.replace(b"\0", b" ").decode("utf-8", "replace") or "?"
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        with open(f"/proc/{pid}/stat", "rb") as handle:
+            data = handle.read()
+        fields = data[data.rfind(b")") + 2 :].split()
+        started = boot + int(fields[19]) / ticks
+    return Squatter(int(pid), domain, user, command, started or time.time())

@@ -1,0 +1,45 @@
+"""Keeping the test's whole process tree under the runner, and reaping what dies in it.
+
+As a child subreaper (Linux), the runner becomes the parent of every orphan in the
+test's tree: a double-forked daemon stays its descendant, where the runner's cleanup
+and ctest's timeout kill both find it. Run as PID 1 of a container, it must also reap
+them, or zombies pile up.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import os
+
+_PR_SET_CHILD_SUBREAPER = 36
+
+
+def become_subreaper() -> bool:
+    """Adopt orphaned descendants (Linux 3.4+); False where the kernel says no."""
+    if os.getpid() == 1:
+        return True  # PID 1 adopts every orphan of its namespace anyway.
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        return bool(libc.prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0)
+    except (OSError, AttributeError):
+        return False
+
+
+def reap_orphans(keep: int | None = None) -> int:
+    """Reap every exited child except ``keep`` (the test, whose status Popen collects).
+
+    Returns how many were reaped. Stops at ``keep``: its status must stay for Popen.
+    """
+    reaped = 0
+    while True:
+        try:
+            info = os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return reaped
+        if info is None or info.si_pid in (0, keep):
+            return reaped
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(info.si_pid, 0)
+            reaped += 1
