@@ -23,8 +23,8 @@ RUN python3 -m venv --system-site-packages /opt/ros-isolated-test/venv \
     && ln -s /opt/ros-isolated-test/venv/bin/ros-isolated-test /usr/local/bin/ros-isolated-test \
     && ros-isolated-test --version
 
-# The default lock directory; bind-mount it to share the pool between containers.
-VOLUME ["/tmp/ros-isolated-test-domains"]
+# The default lock directory is /tmp/ros-isolated-test-domains: bind-mount the host's
+# to share one pool between containers and the host.
 
 # ros_entrypoint.sh sources ROS, then execs the runner, which becomes PID 1: it reaps
 # orphaned zombies, passes SIGTERM (docker stop) on to the test, and exits with its code.
