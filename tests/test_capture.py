@@ -99,7 +99,8 @@ def test_invalid_utf8_and_ansi_codes_leave_a_valid_result(
     assert case.outcome == "failure"
     assert "red text" in case.text, "ANSI colour codes are stripped"
     assert "\x1b" not in case.text
-    assert "bad \ufffd\ufffd bytes" in case.text
+    # Shown as \xNN, never U+FFFD: xunit-viewer aborts its whole run on a U+FFFD.
+    assert "bad \\xff\\xfe bytes" in case.text
     assert "bell" in case.text
     assert "end" in case.text
 
@@ -235,8 +236,13 @@ def test_xml_safe_drops_ansi_codes_and_shows_other_illegal_characters() -> None:
 
 
 def test_xml_safe_keeps_legal_text_as_it_is() -> None:
-    text = "tab\tnewline\nreturn\r <&>\"' ünïcode 漢字 \U0001f916 \ufffd"
+    text = "tab\tnewline\nreturn\r <&>\"' ünïcode 漢字 \U0001f916 \u0085 \x7f"
     assert xml_safe(text) == text
+
+
+def test_xml_safe_shows_the_replacement_character() -> None:
+    """Legal XML, but xunit-viewer takes a file holding U+FFFD for CP1252 and aborts."""
+    assert xml_safe("a\ufffdb") == "a\\ufffdb"
 
 
 def test_xml_safe_caps_long_text_keeping_head_and_tail() -> None:

@@ -67,7 +67,7 @@ class OutputCapture:
         return bytes(self._tail[-self._tail_limit :])
 
     def tail_text(self) -> str:
-        """The tail decoded as run_test.py does: UTF-8, the locale's encoding, else replaced."""
+        """The tail decoded as run_test.py does: UTF-8, the locale's encoding, else shown."""
         data = self.tail_bytes()
         encodings = ["utf-8"]
         preferred = locale.getpreferredencoding(False)
@@ -80,7 +80,8 @@ class OutputCapture:
             except (UnicodeDecodeError, LookupError):
                 continue
         else:
-            text = data.decode("utf-8", errors="replace")
+            # Bad bytes shown as \xNN, never as U+FFFD (which xunit-viewer cannot read).
+            text = data.decode("utf-8", errors="backslashreplace")
         if self.truncated:
             cut = self.total_bytes - len(data)
             text = f"[... {cut} earlier bytes of output not kept here ...]\n{text}"

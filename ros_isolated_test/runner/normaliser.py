@@ -15,6 +15,7 @@ from collections.abc import Iterable
 
 from ros_isolated_test.runner.bounded_text import bounded
 from ros_isolated_test.runner.junit_model import Case, Outcome
+from ros_isolated_test.runner.xml_text import name_token
 from ros_isolated_test.runner.xunit_reader import (
     TEXT_LIMIT,
     RawCase,
@@ -29,7 +30,7 @@ _PRIMARY = {"failure": Outcome.FAILURE, "error": Outcome.ERROR, "skipped": Outco
 
 def prefixed(package: str | None, classname: str) -> str:
     """``<package>.`` exactly once in front of ``classname``."""
-    if not package or classname == package or classname.startswith(f"{package}."):
+    if not package or classname.startswith(f"{package}."):
         return classname
     return f"{package}.{classname}"
 
@@ -151,21 +152,27 @@ def _rank(outcome: Outcome) -> int:
 
 def _case(raw: RawCase, package: str | None, fallback: str, index: int) -> Case:
     attrs = raw.attrs
-    name = attrs.get("name", "").strip()
-    classname = attrs.get("classname", "").strip()
+    # One line, bounded: as written, so merging sees the names the file will carry.
+    name = name_token(attrs.get("name", ""), "")
+    classname = name_token(attrs.get("classname", ""), "")
     suite = _XMLRUNNER_SUFFIX.sub("", raw.suite.strip())
     setup = _SETUP_CLASS.match(name)
     if not classname and setup:
         # xmlrunner reports a setUpClass error with the class only inside the name.
         classname = _XMLRUNNER_SUFFIX.sub("", setup.group(2))
-    if not name and not classname and raw.complete and raw.outcomes:
-        # gtest's ad-hoc failures: an environment or suite set-up/tear-down failed.
+    if not name and (not classname or classname.endswith(".")) and raw.outcomes:
+        # gtest's ad-hoc failures: an environment or suite set-up/tear-down failed. Its
+        # empty classname may already carry upstream run_test.py's "<package>." prefix.
         name = (
             "global environment set-up or tear-down"
             if suite == "NonTestSuiteFailure"
             else "suite set-up or tear-down"
         )
-    classname = classname or suite or fallback
+        classname = suite
+    classname = classname.rstrip(".") or suite or fallback
+    if package and classname == package:
+        # ament's own results and pytest's collection errors name only the package.
+        classname = f"{package}.{fallback}"
     name = name or f"unnamed test case {index}"
     case = Case(
         classname=prefixed(package, classname),

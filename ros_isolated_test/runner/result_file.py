@@ -71,8 +71,10 @@ class ResultFile:
         """``<package>.<test name>``: unique across a build, as CI reports need."""
         return f"{self.request.package}.{self.request.test_name}"
 
-    def write(self, cases: list[Case], duration: float = 0.0, output: str = "") -> bytes | None:
-        """Write the canonical file holding ``cases``; returns its bytes."""
+    def write(
+        self, cases: list[Case], duration: float = 0.0, output: str = ""
+    ) -> results.Rendered | None:
+        """Write the canonical file holding ``cases``; None when no file was asked for."""
         if self.path is None:
             return None
         suite = Suite(
@@ -84,9 +86,9 @@ class ResultFile:
             properties=dict(self.properties),
             system_out=output,
         )
-        data = results.render(suite)
-        results.write_atomically(self.path, data)
-        return data
+        rendered = results.render(suite)
+        results.write_atomically(self.path, rendered.data)
+        return rendered
 
     def write_placeholder(self) -> None:
         """What ctest leaves behind if it kills the runner: the test did not finish."""
@@ -95,7 +97,8 @@ class ResultFile:
             "ended, as a ctest TIMEOUT does (SIGKILL, no chance to write anything else): "
             "the test most likely timed out."
         )
-        self.placeholder = self.write([self.case(Outcome.ERROR, message)])
+        rendered = self.write([self.case(Outcome.ERROR, message)])
+        self.placeholder = rendered.data if rendered is not None else None
 
     def untouched(self) -> bool:
         """Whether the test left our placeholder (or nothing) in place."""
@@ -140,4 +143,5 @@ def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, boo
         hostname=results.hostname(),
         properties=properties,
     )
-    return results.render(suite), suite.failed
+    rendered = results.render(suite)
+    return rendered.data, rendered.failed

@@ -11,14 +11,17 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import stat
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from lxml import etree
 
 from ros_isolated_test import __version__
 from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
+from ros_isolated_test.runner.xml_text import name_token
 from ros_isolated_test.runner.xml_text import xml_safe as _xml_safe
 from ros_isolated_test.runner.xunit_reader import TEXT_LIMIT
 from ros_isolated_test.schemas import junit_schema
@@ -47,7 +50,8 @@ def _seconds(value: float) -> str:
 
 def build(suite: Suite) -> etree._Element:
     """The ``<testsuites>`` tree of one suite, counts recomputed from its cases."""
-    root = etree.Element("testsuites", name=xml_safe(suite.name, 1024))
+    suite_name = name_token(suite.name, "ros_isolated_test.result")
+    root = etree.Element("testsuites", name=suite_name)
     counts = {
         "tests": len(suite.cases),
         "failures": suite.count(Outcome.FAILURE),
@@ -57,15 +61,17 @@ def build(suite: Suite) -> etree._Element:
     for key in ("tests", "failures", "errors"):
         root.set(key, str(counts[key]))
     root.set("time", _seconds(suite.time))
-    element = etree.SubElement(root, "testsuite", name=xml_safe(suite.name, 1024))
+    element = etree.SubElement(root, "testsuite", name=suite_name)
     for key in _COUNTS:
         element.set(key, str(counts[key]))
     element.set("time", _seconds(suite.time))
     element.set("timestamp", suite.timestamp)
-    element.set("hostname", xml_safe(suite.hostname, 255) or "localhost")
+    element.set("hostname", name_token(suite.hostname, "localhost", 255))
     properties = etree.SubElement(element, "properties")
     for name, value in {**suite.properties, "runner_version": __version__}.items():
-        etree.SubElement(properties, "property", name=name, value=xml_safe(value, 4096))
+        etree.SubElement(
+            properties, "property", name=name_token(name, "property"), value=xml_safe(value, 4096)
+        )
     for case in suite.cases:
         _add_case(element, case)
     _add_output(element, suite.system_out, suite.system_err)
@@ -76,8 +82,8 @@ def _add_case(parent: etree._Element, case: Case) -> None:
     element = etree.SubElement(
         parent,
         "testcase",
-        classname=xml_safe(case.classname, 1024),
-        name=xml_safe(case.name, 1024),
+        classname=name_token(case.classname, "unnamed"),
+        name=name_token(case.name, "unnamed"),
         time=_seconds(case.time),
     )
     if case.outcome is not Outcome.PASSED:
@@ -120,13 +126,40 @@ def problems(root: etree._Element) -> list[str]:
     return found
 
 
-def render(suite: Suite) -> bytes:
-    """The canonical file's bytes; an invalid document becomes a valid one saying why."""
+@dataclass(frozen=True)
+class Rendered:
+    """A canonical file's bytes, and whether it reports a failure or an error."""
+
+    data: bytes
+    failed: bool
+
+
+def render(suite: Suite) -> Rendered:
+    """The canonical file; an invalid document becomes a valid one saying why (a failure).
+
+    ``failed`` is read from the document written, so a result replaced by the internal
+    error case fails the run instead of passing it silently.
+    """
     root = build(suite)
     found = problems(root)
     if found:
         root = build(_internal_error(suite, found))
-    return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
+        if problems(root):
+            root = build(_internal_error(_bare(suite), found))
+    failed = any(True for _ in root.iter("failure", "error"))
+    data = bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
+    return Rendered(data, failed)
+
+
+def _bare(suite: Suite) -> Suite:
+    """The suite stripped of everything it got from outside, for the last-resort file."""
+    return Suite(
+        name="ros_isolated_test.result",
+        cases=suite.cases,
+        time=0.0,
+        timestamp=timestamp(),
+        hostname="localhost",
+    )
 
 
 def _internal_error(suite: Suite, found: list[str]) -> Suite:
@@ -137,7 +170,7 @@ def _internal_error(suite: Suite, found: list[str]) -> Suite:
         f"Schema problems: {'; '.join(found[:5])}"
     )
     case = Case(
-        classname=suite.name,
+        classname=name_token(suite.name, "ros_isolated_test.result"),
         name="result file",
         outcome=Outcome.ERROR,
         message=message,
@@ -145,7 +178,7 @@ def _internal_error(suite: Suite, found: list[str]) -> Suite:
         type="InternalError",
     )
     return Suite(
-        name=suite.name or "ros_isolated_test.result",
+        name=suite.name,
         cases=[case],
         time=suite.time,
         timestamp=timestamp(),
@@ -170,9 +203,17 @@ def write_atomically(path: Path, data: bytes) -> None:
 
 
 def holds_exactly(path: Path, data: bytes) -> bool:
-    """Whether the file still holds ``data`` (the placeholder the test did not replace)."""
+    """Whether the file still holds ``data`` (the placeholder the test did not replace).
+
+    Opened without blocking and read only if it is a regular file: a test may leave a
+    FIFO at the path, and that must not hang the runner.
+    """
     try:
-        with open(path, "rb") as handle:
-            return handle.read(len(data) + 1) == data
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError:
         return False
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        return False
+    with os.fdopen(fd, "rb") as handle:
+        return handle.read(len(data) + 1) == data

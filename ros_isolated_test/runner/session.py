@@ -166,7 +166,10 @@ def _conclude(
     skip_code = (
         request.skip_return_code is not None and outcome.returncode == request.skip_return_code
     )
-    if code == 0 and request.generate_result_on_success:
+    # ctest RUNNER: the flag wins over the test's own file, as in run_test.py. `run` never
+    # throws away a file the test wrote itself: it always generates, so it must look first.
+    own_file_first = request.mode is Mode.SHELL and not result.untouched()
+    if code == 0 and request.generate_result_on_success and not own_file_first:
         result.write([result.case(Outcome.PASSED, duration=duration)], duration)
         return code
     if result.untouched():
@@ -200,8 +203,8 @@ def _conclude(
             )
         )
     failed = any(case.outcome.failed for case in cases)
-    result.write(cases, duration, capture.tail_text() if failed or code else "")
-    if failed:
+    rendered = result.write(cases, duration, capture.tail_text() if failed or code else "")
+    if rendered is not None and rendered.failed:
         capture.note(f"the result file {result.path} reports failures or errors")
         return code or exit_codes.FAILED
     return code

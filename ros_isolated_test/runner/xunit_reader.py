@@ -11,8 +11,10 @@ kept. Memory is bounded by the caps below, not by the file.
 from __future__ import annotations
 
 import codecs
+import contextlib
 import os
 import re
+import stat
 import threading
 from collections import Counter
 from dataclasses import dataclass, field
@@ -21,8 +23,8 @@ from typing import BinaryIO, cast
 
 from lxml import etree
 
+from ros_isolated_test.runner import xml_text
 from ros_isolated_test.runner.bounded_text import BoundedText, bounded
-from ros_isolated_test.runner.xml_text import ANSI_ESCAPE, ILLEGAL_CHAR, legal, shown_code
 
 #: Read at most this much of a file; the rest is reported, not parsed.
 MAX_READ_BYTES = 256 * 1024 * 1024
@@ -35,28 +37,30 @@ TEXT_LIMIT = 64 * 1024
 TEXT_BUDGET = 2 * 1024 * 1024
 SMALL_TEXT_LIMIT = 200
 NAME_LIMIT = 256
-#: A prolog (declaration, DOCTYPE, comments) longer than this is not a result file.
-MAX_PROLOG_CHARS = 1024 * 1024
 
 OUTCOME_TAGS = frozenset(
     {"failure", "error", "skipped", "rerunFailure", "rerunError", "flakyFailure", "flakyError"}
 )
 _CHAR_REF = re.compile(r"&#(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));")
 _OPEN_CHAR_REF = re.compile(r"&#x?[0-9a-fA-F]{0,10}$")
-_DECLARATION = re.compile(r"<\?xml[^>]*\?>")
-_DOCTYPE = re.compile(r"<!DOCTYPE(?:[^\[>]|\[.*?\])*>", re.DOTALL)
-_ROOT_START = re.compile(r"<[A-Za-z_:]")
+#: Markup that declares a DTD or entities: never allowed to reach the parser.
+_DTD_MARKUP = re.compile(r"<!(?=DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)")
 _ENCODING = re.compile(rb"""^<\?xml[^>]*encoding\s*=\s*["']([A-Za-z0-9._-]+)["']""")
 _counts = threading.local()
 
 
-def _count_and_replace(error: UnicodeError) -> tuple[str, int]:
+def _count_and_show(error: UnicodeError) -> tuple[str, int]:
+    r"""Show each undecodable byte as ``\xNN``, never as U+FFFD.
+
+    A literal U+FFFD makes xunit-viewer guess the file is CP1252 and abort its run.
+    """
     assert isinstance(error, UnicodeDecodeError)
-    _counts.invalid = getattr(_counts, "invalid", 0) + (error.end - error.start)
-    return "\ufffd", error.end
+    bad = error.object[error.start : error.end]
+    _counts.invalid = getattr(_counts, "invalid", 0) + len(bad)
+    return "".join(f"\\x{byte:02x}" for byte in bad), error.end
 
 
-codecs.register_error("ros_isolated_test.count", _count_and_replace)
+codecs.register_error("ros_isolated_test.count", _count_and_show)
 
 
 @dataclass
@@ -249,8 +253,7 @@ def _worse(current: str, tag: str) -> str:
     return kind if _RANK.get(kind, 0) > _RANK.get(current, 0) else current
 
 
-class _NotAResultFile(Exception):
-    """The prolog never ends: nothing after it is fed to the parser."""
+_NOT_XML = frozenset({"idna", "punycode", "undefined", "raw_unicode_escape", "unicode_escape"})
 
 
 class _Sanitiser:
@@ -261,30 +264,56 @@ class _Sanitiser:
         self.decoder: codecs.IncrementalDecoder | None = None
         self.carry = ""
         self.in_prolog = True
-        self.prolog = ""
+        self.in_comment = False
+        self.doctype = False
+        self.prolog_lines = 0
         self.illegal = 0
 
     def feed(self, data: bytes, final: bool = False) -> bytes:
+        text = self.carry + self._decode(data, final)
+        self.carry = ""
+        if not final:
+            # Keep back a reference, colour code or DTD keyword cut by the chunk boundary.
+            tail = text[-16:]
+            held = [m.start() for m in (_OPEN_CHAR_REF.search(tail),) if m is not None]
+            held += [tail.rfind(mark) for mark in ("\x1b", "<") if mark in tail]
+            if held:
+                cut = len(text) - len(tail) + min(held)
+                text, self.carry = text[:cut], text[cut:]
+        text = xml_text.ANSI_ESCAPE.sub("", text)
+        shown = text.translate(xml_text.CONTROL_TABLE)
+        # Each control character shown grows by 3 (\x01 for one character).
+        self.illegal += (len(shown) - len(text)) // 3
+        text = shown
+        if xml_text.RARE_ILLEGAL.search(text):
+            text = xml_text.RARE_ILLEGAL.sub(self._show, text)
+        if "&#" in text:
+            text = _CHAR_REF.sub(self._show_reference, text)
+        if self.in_prolog:
+            text, unfinished = self._skip_prolog(text)
+            self.carry = unfinished + self.carry
+        if "<!" in text:
+            # Anything DTD-like left (smuggled, late, unterminated) is made inert: the
+            # parser then reports broken markup instead of defining entities.
+            text, found = _DTD_MARKUP.subn("&lt;!", text)
+            if found:
+                self.result.repairs.append(
+                    "DTD markup was made inert: DTDs and entities are never loaded or expanded"
+                )
+        return text.encode("utf-8")
+
+    def _decode(self, data: bytes, final: bool) -> str:
         if self.decoder is None:
             self.decoder = codecs.getincrementaldecoder(self._encoding(data))(
                 "ros_isolated_test.count"
             )
-        text = self.carry + self.decoder.decode(data, final)
-        self.carry = ""
-        if not final:
-            # Keep back a character reference or colour code cut by the chunk boundary.
-            tail = text[-16:]
-            held = [m.start() for m in (_OPEN_CHAR_REF.search(tail),) if m is not None]
-            held += [tail.rfind("\x1b")] if "\x1b" in tail else []
-            if held:
-                cut = len(text) - len(tail) + min(held)
-                text, self.carry = text[:cut], text[cut:]
-        text = ANSI_ESCAPE.sub("", text)
-        text = ILLEGAL_CHAR.sub(self._show, text)
-        text = _CHAR_REF.sub(self._show_reference, text)
-        if self.in_prolog:
-            text = self._defuse_prolog(text, final)
-        return text.encode("utf-8")
+        try:
+            return self.decoder.decode(data, final)
+        except (UnicodeError, LookupError, TypeError, ValueError):
+            # A codec that is no text encoding after all: read the rest as UTF-8.
+            self.result.repairs.append("the declared encoding failed; read as UTF-8")
+            self.decoder = codecs.getincrementaldecoder("utf-8")("ros_isolated_test.count")
+            return self.decoder.decode(data, final)
 
     def _encoding(self, head: bytes) -> str:
         if head.startswith(codecs.BOM_UTF8):
@@ -293,50 +322,72 @@ class _Sanitiser:
             return "utf-16"
         match = _ENCODING.match(head[:512])
         if match:
-            try:
-                return codecs.lookup(match.group(1).decode("ascii")).name
-            except LookupError:
-                self.result.repairs.append(
-                    f"unknown encoding {match.group(1).decode('ascii', 'replace')!r}"
-                    " declared; read as UTF-8"
-                )
+            name = match.group(1).decode("ascii", "replace")
+            with contextlib.suppress(LookupError):
+                info = codecs.lookup(name)
+                # hex, base64, rot13 and the like are codecs, not text encodings.
+                if getattr(info, "_is_text_encoding", True) and info.name not in _NOT_XML:
+                    return info.name
+            self.result.repairs.append(f"unknown encoding {name!r} declared; read as UTF-8")
         return "utf-8"
 
     def _show(self, match: re.Match[str]) -> str:
         self.illegal += 1
-        return shown_code(ord(match.group()))
+        return xml_text.shown_code(ord(match.group()))
 
     def _show_reference(self, match: re.Match[str]) -> str:
         code = int(match.group(1), 16) if match.group(1) else int(match.group(2))
-        if legal(code):
+        if xml_text.legal(code) and code != 0xFFFD:
             return match.group()
         self.illegal += 1
-        return shown_code(code)
+        return xml_text.shown_code(code)
 
-    def _defuse_prolog(self, text: str, final: bool) -> str:
-        """Drop the declaration (we re-encode) and any DOCTYPE (no DTD, no entities)."""
-        self.prolog += text
-        body = _DOCTYPE.sub(self._doctype_found, _DECLARATION.sub("", self.prolog, count=1))
-        start = _ROOT_START.search(body)
-        if start is None and not final:
-            if len(self.prolog) < MAX_PROLOG_CHARS:
-                return ""
-            raise _NotAResultFile(f"no root element in the first {MAX_PROLOG_CHARS // 1024} KiB")
-        self.in_prolog = False
-        self.prolog = ""
-        return body
+    def _skip_prolog(self, text: str) -> tuple[str, str]:
+        """Drop everything before the root element, streaming: nothing there is needed.
 
-    def _doctype_found(self, _match: re.Match[str]) -> str:
-        self.result.repairs.append(
-            "a DOCTYPE was removed: DTDs and entities are never loaded or expanded"
-        )
-        return ""
+        The prolog may only hold the declaration (we re-encode anyway), comments,
+        processing instructions and a DOCTYPE, which must never reach the parser: it
+        could define entities (bombs) or point at files and the network. Returns the
+        text from the root element on, and an unfinished tail to look at again.
+        """
+        index = 0
+        while True:
+            if self.in_comment:
+                end = text.find("-->", index)
+                if end < 0:
+                    self.prolog_lines += text.count("\n", 0, len(text) - 2)
+                    return "", text[-2:]
+                index, self.in_comment = end + 3, False
+                continue
+            start = text.find("<", index)
+            if start < 0 or start + 1 >= len(text):
+                kept = len(text) if start < 0 else start
+                self.prolog_lines += text.count("\n", 0, kept)
+                return "", text[kept:]
+            if len(text) - start < 9 and "<!DOCTYPE".startswith(text[start:]):
+                self.prolog_lines += text.count("\n", 0, start)
+                return "", text[start:]  # a keyword cut by the chunk boundary
+            if text.startswith("<!--", start):
+                self.in_comment, index = True, start + 4
+                continue
+            if text.startswith("<!DOCTYPE", start) and not self.doctype:
+                self.doctype = True
+                self.result.repairs.append(
+                    "a DOCTYPE was removed: DTDs and entities are never loaded or expanded"
+                )
+            following = text[start + 1]
+            if following.isalpha() or following in "_:":
+                self.in_prolog = False
+                # Keep the line count, so the parser's line numbers match the file's.
+                lines = min(self.prolog_lines + text.count("\n", 0, start), 100_000)
+                return "\n" * lines + text[start:], ""
+            index = start + 1
 
     def finish(self) -> None:
         invalid = getattr(_counts, "invalid", 0)
         if invalid:
             self.result.repairs.append(
-                f"{invalid} byte(s) of invalid UTF-8 were replaced by U+FFFD"
+                f"{invalid} byte(s) that were not valid text were written as \\xNN"
             )
         if self.illegal:
             self.result.repairs.append(
@@ -344,66 +395,33 @@ class _Sanitiser:
             )
 
 
+def _open_regular(path: Path, result: ReadResult) -> BinaryIO | None:
+    """The file opened for reading, or None with the reason added to ``result``."""
+    if path.is_dir():
+        result.problems.append("a directory is where the result file should be")
+        return None
+    try:
+        # Non-blocking: a FIFO planted at the path must not hang the runner.
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as error:
+        result.problems.append(f"cannot open the result file: {error.strerror}")
+        return None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        result.problems.append("something other than a file is where the result file should be")
+        return None
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "rb")
+
+
 def read(path: Path) -> ReadResult:
     """Read ``path`` as far as it can be read; never raises for what the file contains."""
     result = ReadResult(path=path)
-    if path.is_dir():
-        result.problems.append("a directory is where the result file should be")
+    handle = _open_regular(path, result)
+    if handle is None:
         return result
-    try:
-        handle = open(path, "rb")  # noqa: SIM115 - closed below, after a bounded loop
-    except OSError as error:
-        result.problems.append(f"cannot open the result file: {error.strerror}")
-        return result
-    builder = _Builder(result)
-    parser = etree.XMLParser(
-        target=cast("etree.ParserTarget", builder),
-        # Safe only because the sanitiser removed every DOCTYPE: no entity is defined
-        # but the five predefined ones, which attribute values need resolved.
-        resolve_entities=True,
-        no_network=True,
-        load_dtd=False,
-        huge_tree=True,
-        remove_pis=True,
-    )
-    sanitiser = _Sanitiser(result)
-    _counts.invalid = 0
-    stopped = False
     with handle:
-        while True:
-            chunk = handle.read(CHUNK_BYTES)
-            result.size += len(chunk)
-            final = not chunk
-            if result.size > MAX_READ_BYTES and not final:
-                total = result.size + _remaining(handle)
-                result.problems.append(
-                    f"only the first {MAX_READ_BYTES // (1024 * 1024)} MiB of {total} bytes "
-                    "were read: the file is too large to be a useful result"
-                )
-                stopped = True
-                break
-            try:
-                parser.feed(sanitiser.feed(chunk, final))
-                if final:
-                    parser.close()
-            except _NotAResultFile as error:
-                result.problems.append(f"not XML ({error})")
-                stopped = True
-                break
-            except etree.XMLSyntaxError as error:
-                if not (builder.root_closed and "Extra content" in str(error)):
-                    result.problems.append(_describe(error, builder, result))
-                else:
-                    result.problems.append(
-                        "content after the root element (a second root?) was ignored"
-                    )
-                stopped = True
-                break
-            if final:
-                break
-    sanitiser.finish()
-    if stopped or not builder.root_closed:
-        builder.finish_open_case()
+        _parse(handle, result)
     if result.size == 0:
         result.problems[:] = ["the result file is empty"]
     elif result.root_tag is None and not result.problems:
@@ -413,6 +431,56 @@ def read(path: Path) -> ReadResult:
             f"the root element is <{result.root_tag}>, not <testsuites> or <testsuite>"
         )
     return result
+
+
+def _parse(handle: BinaryIO, result: ReadResult) -> None:
+    """Stream the file through the sanitiser into the parser, stopping at the first damage."""
+    builder = _Builder(result)
+    parser = etree.XMLParser(
+        target=cast("etree.ParserTarget", builder),
+        # Safe only because no DTD markup reaches the parser: no entity is defined but
+        # the five predefined ones, which attribute values need resolved.
+        resolve_entities=True,
+        no_network=True,
+        load_dtd=False,
+        huge_tree=True,
+        remove_pis=True,
+    )
+    sanitiser = _Sanitiser(result)
+    _counts.invalid = 0
+    stopped = False
+    while True:
+        chunk = handle.read(CHUNK_BYTES)
+        result.size += len(chunk)
+        final = not chunk
+        if result.size > MAX_READ_BYTES and not final:
+            total = result.size + _remaining(handle)
+            result.problems.append(
+                f"only the first {MAX_READ_BYTES // (1024 * 1024)} MiB of {total} bytes "
+                "were read: the file is too large to be a useful result"
+            )
+            stopped = True
+            break
+        try:
+            parser.feed(sanitiser.feed(chunk, final))
+            if final:
+                parser.close()
+        except etree.XMLSyntaxError as error:
+            if sanitiser.in_prolog:
+                result.problems.append("not XML (no element found in it)")
+            elif not (builder.root_closed and "Extra content" in str(error)):
+                result.problems.append(_describe(error, builder, result))
+            else:
+                result.problems.append(
+                    "content after the root element (a second root?) was ignored"
+                )
+            stopped = True
+            break
+        if final:
+            break
+    sanitiser.finish()
+    if stopped or not builder.root_closed:
+        builder.finish_open_case()
 
 
 def _remaining(handle: BinaryIO) -> int:

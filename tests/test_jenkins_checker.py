@@ -1,0 +1,276 @@
+"""The junit-10 checker rejects what Jenkins' xunit-plugin rejects (xunit-formats.md 5.1).
+
+Without this the "valid here is valid there" tests elsewhere could pass with a checker
+that accepts anything.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jenkins_junit10
+import pytest
+from conftest import REPO
+from lxml import etree
+
+SAMPLES = REPO.parent / "shared" / "reference" / "xunit-samples"
+pytestmark = pytest.mark.skipif(not SAMPLES.is_dir(), reason=f"no samples at {SAMPLES}")
+
+#: Samples junit-10 accepts as they are (section 5.1's table; pytest xunit2 without
+#: record_property, so without testcase <properties>).
+ACCEPTED = (
+    "ament_run_test_missing_result.xml",
+    "ament_run_test_missing_result_tidied_ansi.xml",
+    "ament_run_test_skip_result.xml",
+    "ament_run_test_success_result.xml",
+    "launch_testing_junitxml.xml",
+    "pytest-9.2_collection_error.xml",
+    "pytest-9.2_fail_plus_teardown_error.xml",
+    "pytest-9.2_no_tests.xml",
+    "pytest-9.2_rerunfailures.xml",
+    "pytest-9.2_xunit2_junit_logging_all.xml",
+)
+
+_GTEST_CASE = (
+    "<testcase> has undeclared attribute 'file'",
+    "<testcase> has undeclared attribute 'line'",
+    "<testcase> has undeclared attribute 'status'",
+    "<testcase> has undeclared attribute 'result'",
+    "<testcase> has undeclared attribute 'timestamp'",
+    "<testsuite> has undeclared attribute 'disabled'",
+    "<testsuites> has undeclared attribute 'disabled'",
+    "<testsuites> has undeclared attribute 'timestamp'",
+)
+_GTEST_MIXED = (
+    *_GTEST_CASE,
+    "<testcase> has undeclared attribute 'value_param'",
+    "<testcase> has undeclared attribute 'type_param'",
+    "<testcase> may not contain <properties>",
+)
+_CTEST = (
+    "<testsuite> lacks required attribute 'errors'",
+    "<testsuite> has undeclared attribute 'disabled'",
+    "<testcase> has undeclared attribute 'status'",
+)
+_XMLRUNNER = (
+    "<testcase> has undeclared attribute 'file'",
+    "<testcase> has undeclared attribute 'line'",
+    "<testcase> has undeclared attribute 'timestamp'",
+)
+
+#: Samples junit-10 rejects, with every reason section 5.1 gives for them.
+REJECTED: dict[str, tuple[str, ...]] = {
+    "ctest-3.25.1_output-junit.xml": _CTEST,
+    "ctest-4.4.4_output-junit.xml": (*_CTEST, "<testcase> may not contain <properties>"),
+    "gtest-1.12.1_env_failure.xml": (
+        *_GTEST_CASE,
+        # <= 1.15 writes environment properties as attributes of the root.
+        "<testsuites> has undeclared attribute 'envkey'",
+        "<testsuites> has undeclared attribute 'random_seed'",
+        "<testcase> may not contain <properties>",
+    ),
+    "gtest-1.12.1_mixed.gtest.xml": (
+        *_GTEST_MIXED,
+        # <= 1.15 writes SetUpTestSuite properties as attributes of the suite.
+        "<testsuite> has undeclared attribute 'suitekey'",
+    ),
+    "gtest-1.17.0_env_failure.xml": (
+        *_GTEST_CASE,
+        # >= 1.16 writes them as <properties> of the root instead.
+        "<testsuites> may not contain <properties>",
+        "<testcase> may not contain <properties>",
+    ),
+    "gtest-1.17.0_mixed.gtest.xml": _GTEST_MIXED,
+    "gtest-1.17.0_setupsuite_failure_after_run_test.gtest.xml": _GTEST_CASE,
+    "pytest-9.2_xunit1.xml": (
+        "<testcase> has undeclared attribute 'file'",
+        "<testcase> has undeclared attribute 'line'",
+        "<testcase> has undeclared attribute 'custom_attr'",
+        "<testcase> may not contain <properties>",
+    ),
+    # record_property was used: xunit2 keeps the testcase <properties>.
+    "pytest-9.2_xunit2.xml": ("<testcase> may not contain <properties>",),
+    "xmlrunner-4.0_per_class_file.xml": _XMLRUNNER,
+    # The setUpClass error case has a timestamp but no file or line.
+    "xmlrunner-4.0_setUpClass_error.xml": ("<testcase> has undeclared attribute 'timestamp'",),
+    "xmlrunner-4.0_single_file.xml": _XMLRUNNER,
+}
+
+#: Not well-formed at all: gtest passes invalid UTF-8 through, launch_testing writes a
+#: raw control character. Their structure is still judged, read with recovery.
+NOT_WELL_FORMED = (
+    "gtest-1.12.1_mixed.gtest.xml",
+    "gtest-1.17.0_mixed.gtest.xml",
+    "launch_testing_junitxml_ctrlchar_INVALID.xml",
+)
+
+
+def _recovered(path: Path) -> etree._Element:
+    return etree.fromstring(path.read_bytes(), etree.XMLParser(recover=True))
+
+
+def test_every_sample_has_a_verdict() -> None:
+    judged = set(ACCEPTED) | set(REJECTED) | set(NOT_WELL_FORMED)
+    assert judged == {path.name for path in SAMPLES.iterdir()}
+
+
+@pytest.mark.parametrize("name", ACCEPTED)
+def test_accepts_what_junit10_accepts(name: str) -> None:
+    assert jenkins_junit10.file_rejections(SAMPLES / name) == []
+
+
+@pytest.mark.parametrize("name", sorted(REJECTED))
+def test_rejects_samples_for_the_reasons_junit10_has(name: str) -> None:
+    path = SAMPLES / name
+    found = set(jenkins_junit10.rejections(_recovered(path)))
+    missing = [reason for reason in REJECTED[name] if reason not in found]
+    assert not missing, f"{name}: expected {missing} among {sorted(found)}"
+    assert jenkins_junit10.file_rejections(path)
+
+
+@pytest.mark.parametrize("name", NOT_WELL_FORMED)
+def test_rejects_files_that_are_not_well_formed(name: str) -> None:
+    found = jenkins_junit10.file_rejections(SAMPLES / name)
+    assert len(found) == 1
+    assert found[0].startswith("not well-formed XML")
+
+
+def test_launch_testing_structure_is_fine_apart_from_the_character() -> None:
+    path = SAMPLES / "launch_testing_junitxml_ctrlchar_INVALID.xml"
+    assert jenkins_junit10.rejections(_recovered(path)) == []
+
+
+def test_rejects_an_empty_file(tmp_path: Path) -> None:
+    empty = tmp_path / "empty.xml"
+    empty.write_bytes(b"")
+    assert jenkins_junit10.file_rejections(empty)[0].startswith("not well-formed XML")
+
+
+# --- synthetic documents: one rule each ------------------------------------------------------
+
+SUITE = '<testsuite name="s" tests="1" failures="0" errors="0"{attrs}>{body}</testsuite>'
+
+
+def _suite(body: str = '<testcase name="c"/>', attrs: str = "") -> list[str]:
+    return jenkins_junit10.rejections(etree.fromstring(SUITE.format(attrs=attrs, body=body)))
+
+
+def _doc(text: str) -> list[str]:
+    return jenkins_junit10.rejections(etree.fromstring(text))
+
+
+def test_a_plain_valid_document_is_accepted() -> None:
+    text = (
+        '<testsuites name="all" time="1.5" tests="2" failures="1" errors="0">'
+        '<testsuite name="s" tests="2" failures="1" errors="0" skipped="0" time="1.5" '
+        'timestamp="2026-01-01T00:00:00" hostname="h" id="0" package="p" file="f" log="l" '
+        'url="u" group="g">'
+        '<properties><property name="k" value=""/></properties>'
+        '<testcase name="a" classname="C" time="0.5" group="g"/>'
+        '<testcase name="b" classname="C" time="whatever">'
+        '<failure message="m" type="T">text</failure><system-out>o</system-out>'
+        "<system-err>e</system-err></testcase>"
+        "<system-out>suite out</system-out><system-err>suite err</system-err>"
+        "</testsuite></testsuites>"
+    )
+    assert _doc(text) == []
+
+
+def test_counts_are_free_strings() -> None:
+    assert _doc('<testsuite name="s" tests="x" failures="" errors="1.0"/>') == []
+
+
+@pytest.mark.parametrize("time", ["0", "0.", "1,234.5", "", "12.125", "1,234,567"])
+def test_surefire_time_accepted(time: str) -> None:
+    assert _suite(attrs=f' time="{time}"') == []
+    assert _doc(f'<testsuites time="{time}"/>') == []
+
+
+@pytest.mark.parametrize("time", ["1e-05", "-1", " 1", "0,5", "NaN", "1.5s", "inf"])
+def test_surefire_time_rejected(time: str) -> None:
+    assert _suite(attrs=f' time="{time}"') == [
+        f"<testsuite> time={time!r} does not match SUREFIRE_TIME"
+    ]
+    assert _doc(f'<testsuites time="{time}"/>') != []
+
+
+def test_testcase_time_is_a_free_string() -> None:
+    assert _suite('<testcase name="c" time="1e-05"/>') == []
+
+
+@pytest.mark.parametrize("attribute", ["name", "tests", "failures", "errors"])
+def test_testsuite_required_attributes(attribute: str) -> None:
+    attrs = {"name": "s", "tests": "0", "failures": "0", "errors": "0"}
+    del attrs[attribute]
+    text = "<testsuite " + " ".join(f'{k}="{v}"' for k, v in attrs.items()) + "/>"
+    assert _doc(text) == [f"<testsuite> lacks required attribute {attribute!r}"]
+
+
+def test_testcase_needs_a_name_and_nothing_else() -> None:
+    assert _suite("<testcase/>") == ["<testcase> lacks required attribute 'name'"]
+    assert _suite('<testcase name="c"/>') == []
+
+
+@pytest.mark.parametrize(
+    ("body", "reason"),
+    [
+        ('<testcase name="c" file="f.py"/>', "<testcase> has undeclared attribute 'file'"),
+        ('<testcase name="c"><failure kind="x"/></testcase>', "<failure> has undeclared"),
+        ('<testcase name="c"><properties/></testcase>', "<testcase> may not contain <prop"),
+        ('<testcase name="c"><foo/></testcase>', "<testcase> may not contain <foo>"),
+        ('<testcase name="c"><failure><b>x</b></failure></testcase>', "<failure> may not"),
+        ('<testcase name="c">stray text</testcase>', "<testcase> holds character data"),
+        ("<properties><property name='k'/></properties>", "lacks required attribute 'value'"),
+        ("<properties><property value='v'/></properties>", "lacks required attribute 'name'"),
+        ("<properties><foo/></properties>", "<properties> may not contain <foo>"),
+        ("<system-out><b>x</b></system-out>", "<system-out> may not contain <b>"),
+        ("stray text", "<testsuite> holds character data"),
+        ('<testcase name="c"><rerunFailure/></testcase>', "lacks required attribute 'type'"),
+        (
+            '<testcase name="c"><rerunFailure type="T"><system-out>o</system-out>'
+            "<stackTrace>s</stackTrace></rerunFailure></testcase>",
+            "<rerunFailure> children",
+        ),
+    ],
+)
+def test_rejected_content(body: str, reason: str) -> None:
+    found = _suite(body)
+    assert any(reason in item for item in found), found
+
+
+def test_rerun_and_flaky_elements_with_type_are_accepted() -> None:
+    body = (
+        '<testcase name="c"><rerunFailure type="T" message="m">text<stackTrace>s</stackTrace>'
+        '<system-out>o</system-out></rerunFailure><flakyError type="T"/></testcase>'
+    )
+    assert _suite(body) == []
+
+
+def test_nested_suites_are_allowed() -> None:
+    assert _suite(SUITE.format(attrs="", body='<testcase name="c"/>')) == []
+
+
+def test_testsuites_holds_only_testsuite_elements() -> None:
+    assert _doc('<testsuites><testcase name="c"/></testsuites>') == [
+        "<testsuites> may not contain <testcase>"
+    ]
+    assert _doc("<testsuites><properties/></testsuites>") == [
+        "<testsuites> may not contain <properties>"
+    ]
+    assert _doc('<testsuites skipped="0"/>') == ["<testsuites> has undeclared attribute 'skipped'"]
+
+
+def test_comments_and_whitespace_are_not_content() -> None:
+    assert _suite('\n  <!-- a docstring -->\n  <testcase name="c"><!-- c --></testcase>\n') == []
+
+
+@pytest.mark.parametrize(
+    "text", ["<testcase name='c'/>", "<report/>", '<x:testsuite xmlns:x="urn:x" name="s"/>']
+)
+def test_other_roots_are_rejected(text: str) -> None:
+    assert _doc(text)[0].startswith("root <")
+
+
+def test_namespaced_elements_are_unknown() -> None:
+    found = _suite('<testcase name="c"><x:failure xmlns:x="urn:x"/></testcase>')
+    assert found == ["<testcase> may not contain <{urn:x}failure>"]

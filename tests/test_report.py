@@ -1,0 +1,302 @@
+"""``ros-isolated-test report``: a tree of result files summarised, as real processes."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from conftest import run_cli
+from lxml import etree
+
+SAMPLES = Path("/work/shared/reference/xunit-samples")
+RESULTS = Path("build/pkg_a/test_results/pkg_a")
+LINE = re.compile(r"^(?P<path>.+): (\d+) tests, (\d+) errors, (\d+) failures, (\d+) skipped$")
+SUMMARY = re.compile(r"^Summary: (\d+) tests, (\d+) errors, (\d+) failures, (\d+) skipped$")
+CTEST_SITE = (
+    '<?xml version="1.0" encoding="UTF-8"?>\n<Site BuildName="Linux" Name="vm">'
+    '<Testing><TestList><Test>./t</Test></TestList><Test Status="failed"><Name>t</Name>'
+    "</Test></Testing></Site>\n"
+)
+
+Counts = tuple[int, int, int, int]
+"""(tests, errors, failures, skipped), the order of colcon's line."""
+
+
+@dataclass(frozen=True)
+class Tree:
+    root: Path
+    expected: dict[str, Counts]
+    """Counts of each file report must list, by path relative to ``root``."""
+
+
+def failed_cases_of(sample: Path) -> list[tuple[str, str, str, str]]:
+    """(classname, name, outcome, message) of each failing case, read from the raw sample."""
+    found = []
+    for case in etree.parse(str(sample)).getroot().iter("testcase"):
+        for child in case:
+            if child.tag in ("failure", "error"):
+                found.append(
+                    (
+                        case.get("classname", ""),
+                        case.get("name", ""),
+                        str(child.tag),
+                        child.get("message", ""),
+                    )
+                )
+    return found
+
+
+def canonical_run(env: dict[str, str], cwd: Path, result: Path, script: str) -> None:
+    """A canonical file written by ``run --junit-xml`` for a real command."""
+    proc = run_cli(
+        ["run", "--package-name", "pkg_a", "--junit-xml", str(result), "--", "sh", "-c", script],
+        env,
+        cwd=cwd,
+    )
+    assert result.is_file(), proc.stdout + proc.stderr
+
+
+@pytest.fixture
+def tree(env: dict[str, str], tmp_path: Path) -> Tree:
+    """A colcon build tree: canonical and raw files, a ctest Test.xml, broken and hidden ones."""
+    root = tmp_path / "ws"
+    results = root / RESULTS
+    results.mkdir(parents=True)
+    canonical_run(env, root, results / "talker.xml", "echo fine")
+    canonical_run(env, root, results / "crash.xml", "echo boom-marker; exit 4")
+    shutil.copy(SAMPLES / "pytest-9.2_xunit2.xml", results / "pytest_raw.xml")
+    proc = run_cli(
+        [
+            "normalise",
+            "--package-name",
+            "pkg_a",
+            str(SAMPLES / "pytest-9.2_xunit2.xml"),
+            "-o",
+            str(results / "pytest_canonical.xml"),
+        ],
+        env,
+        cwd=root,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    shutil.copy(SAMPLES / "ament_run_test_skip_result.xml", results / "skipped_raw.xml")
+    (results / "broken.xml").write_text("this is not xml\n")
+    testing = root / "build/pkg_a/Testing/20260101-0000"
+    testing.mkdir(parents=True)
+    (testing / "Test.xml").write_text(CTEST_SITE)
+    for hidden in (root / "build/.hidden", root / "build/pkg_a/.colcon"):
+        hidden.mkdir(parents=True)
+        shutil.copy(SAMPLES / "ament_run_test_missing_result.xml", hidden / "stale.xml")
+    expected = {
+        f"{RESULTS}/talker.xml": (1, 0, 0, 0),
+        f"{RESULTS}/crash.xml": (1, 0, 1, 0),
+        # The counts colcon reports for this sample (xunit-formats.md, section 3).
+        f"{RESULTS}/pytest_raw.xml": (12, 2, 2, 3),
+        f"{RESULTS}/pytest_canonical.xml": (12, 2, 2, 3),
+        f"{RESULTS}/skipped_raw.xml": (1, 0, 0, 1),
+        f"{RESULTS}/broken.xml": (1, 1, 0, 0),
+    }
+    return Tree(root, expected)
+
+
+def file_lines(stdout: str) -> dict[str, Counts]:
+    found: dict[str, Counts] = {}
+    for line in stdout.splitlines():
+        match = LINE.match(line)
+        if match and not line.startswith("Summary: "):
+            path, *counts = match.groups()
+            assert path not in found, f"{path} listed twice"
+            found[path] = (int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3]))
+    return found
+
+
+def summary_of(stdout: str) -> Counts:
+    lines = [line for line in stdout.splitlines() if line.strip()]
+    match = SUMMARY.match(lines[-1])
+    assert match, f"last line is not the summary:\n{stdout}"
+    tests, errors, failures, skipped = (int(value) for value in match.groups())
+    return tests, errors, failures, skipped
+
+
+def total(counts: list[Counts]) -> Counts:
+    return (
+        sum(item[0] for item in counts),
+        sum(item[1] for item in counts),
+        sum(item[2] for item in counts),
+        sum(item[3] for item in counts),
+    )
+
+
+# --- the summary -------------------------------------------------------------------------------
+
+
+def test_default_path_is_build_and_every_result_file_gets_its_line(
+    tree: Tree, env: dict[str, str]
+) -> None:
+    proc = run_cli(["report"], env, cwd=tree.root)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    # Test.xml (root <Site>) is not a result and hidden folders are skipped, as colcon does.
+    assert file_lines(proc.stdout) == tree.expected
+    assert "Test.xml" not in proc.stdout
+    assert "stale.xml" not in proc.stdout
+    assert summary_of(proc.stdout) == total(list(tree.expected.values()))
+
+
+def test_raw_and_canonical_form_of_the_same_file_count_alike(
+    tree: Tree, env: dict[str, str]
+) -> None:
+    proc = run_cli(
+        ["report", str(RESULTS / "pytest_raw.xml"), str(RESULTS / "pytest_canonical.xml")],
+        env,
+        cwd=tree.root,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = file_lines(proc.stdout)
+    assert lines[str(RESULTS / "pytest_raw.xml")] == lines[str(RESULTS / "pytest_canonical.xml")]
+
+
+def test_explicit_paths_are_read_from_anywhere(
+    tree: Tree, env: dict[str, str], tmp_path: Path
+) -> None:
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    build = tree.root / "build"
+    proc = run_cli(["report", str(build)], env, cwd=elsewhere)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    expected = {str(tree.root / path): counts for path, counts in tree.expected.items()}
+    assert file_lines(proc.stdout) == expected
+
+
+def test_exit_code_is_zero_when_everything_passed_or_was_skipped(
+    tree: Tree, env: dict[str, str], tmp_path: Path
+) -> None:
+    clean = tmp_path / "clean"
+    results = clean / "pkg"
+    results.mkdir(parents=True)
+    shutil.copy(tree.root / RESULTS / "talker.xml", results / "talker.xml")
+    shutil.copy(SAMPLES / "ament_run_test_skip_result.xml", results / "skipped.xml")
+    shutil.copy(SAMPLES / "ament_run_test_success_result.xml", results / "success.xml")
+    (results / "Test.xml").write_text(CTEST_SITE)
+    # A failing file in a hidden folder must not count.
+    (clean / ".old").mkdir()
+    shutil.copy(SAMPLES / "ament_run_test_missing_result.xml", clean / ".old" / "failed.xml")
+    proc = run_cli(["report", str(clean)], env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert file_lines(proc.stdout) == {
+        f"{results}/skipped.xml": (1, 0, 0, 1),
+        f"{results}/success.xml": (1, 0, 0, 0),
+        f"{results}/talker.xml": (1, 0, 0, 0),
+    }
+    assert summary_of(proc.stdout) == (3, 0, 0, 1)
+
+
+def test_only_a_ctest_site_file_is_nothing_to_report(env: dict[str, str], tmp_path: Path) -> None:
+    (tmp_path / "Test.xml").write_text(CTEST_SITE)
+    proc = run_cli(["report", str(tmp_path)], env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert file_lines(proc.stdout) == {}
+    assert summary_of(proc.stdout) == (0, 0, 0, 0)
+
+
+def test_a_broken_file_alone_fails_the_report(env: dict[str, str], tmp_path: Path) -> None:
+    (tmp_path / "cut.xml").write_text(
+        '<testsuites><testsuite name="s" tests="1"><testcase classname="C" name="ok"/>'
+    )
+    proc = run_cli(["report", str(tmp_path)], env, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    # The case before the damage is kept; the damage is one error.
+    assert file_lines(proc.stdout) == {f"{tmp_path}/cut.xml": (2, 1, 0, 0)}
+
+
+# --- --verbose and --json ----------------------------------------------------------------------
+
+
+def test_verbose_lists_each_failing_case_with_classname_name_and_message(
+    tree: Tree, env: dict[str, str]
+) -> None:
+    proc = run_cli(["report", "--verbose"], env, cwd=tree.root)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    out = proc.stdout
+    assert file_lines(out) == tree.expected
+    assert "- pkg_a.crash crash (failure)\n" in out
+    crash = out.split("- pkg_a.crash crash (failure)\n", 1)[1]
+    assert "exited with code 4" in crash.split("\n- ", 1)[0]
+    assert "boom-marker" in crash.split("\n- ", 1)[0]
+    failing = failed_cases_of(SAMPLES / "pytest-9.2_xunit2.xml")
+    assert len(failing) == 4
+    for classname, name, outcome, message in failing:
+        head = f"- {classname} {name} ({outcome})\n"
+        assert head in out, f"{head!r} missing from:\n{out}"
+        assert f"{head}  {message.splitlines()[0]}\n" in out
+    assert "- broken result file (error)\n  Invalid result file broken.xml" in out
+    # Passing and skipped cases are not listed.
+    assert "- pkg_a.talker" not in out
+    listed = [line for line in out.splitlines() if line.startswith("- ")]
+    assert len(listed) == sum(
+        errors + failures for _, errors, failures, _ in tree.expected.values()
+    )
+
+
+def test_json_has_the_same_numbers_and_the_failed_cases(tree: Tree, env: dict[str, str]) -> None:
+    plain = run_cli(["report"], env, cwd=tree.root)
+    proc = run_cli(["report", "--json"], env, cwd=tree.root)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    data = json.loads(proc.stdout)
+    files = {
+        row["path"]: (row["tests"], row["errors"], row["failures"], row["skipped"])
+        for row in data["files"]
+    }
+    assert files == file_lines(plain.stdout) == tree.expected
+    totals = data["total"]
+    assert (totals["tests"], totals["errors"], totals["failures"], totals["skipped"]) == (
+        summary_of(plain.stdout)
+    )
+    for row in data["files"]:
+        assert len(row["failed_cases"]) == row["errors"] + row["failures"], row
+        for case in row["failed_cases"]:
+            assert set(case) >= {"classname", "name", "outcome", "message"}
+            assert case["outcome"] in ("failure", "error")
+            assert case["message"], case
+    by_path = {row["path"]: row for row in data["files"]}
+    [crash] = by_path[f"{RESULTS}/crash.xml"]["failed_cases"]
+    assert (crash["classname"], crash["name"], crash["outcome"]) == (
+        "pkg_a.crash",
+        "crash",
+        "failure",
+    )
+    assert "exited with code 4" in crash["message"]
+    raw = {
+        (case["classname"], case["name"], case["outcome"], case["message"])
+        for case in by_path[f"{RESULTS}/pytest_raw.xml"]["failed_cases"]
+    }
+    assert raw == set(failed_cases_of(SAMPLES / "pytest-9.2_xunit2.xml"))
+
+
+def test_json_exit_code_is_zero_when_all_passed(tree: Tree, env: dict[str, str]) -> None:
+    proc = run_cli(["report", "--json", str(RESULTS / "talker.xml")], env, cwd=tree.root)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["total"] == {"tests": 1, "errors": 0, "failures": 0, "skipped": 0}
+    assert data["files"][0]["failed_cases"] == []
+
+
+# --- usage errors ------------------------------------------------------------------------------
+
+
+def test_no_build_folder_and_no_path_is_a_usage_error(env: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(["report"], env, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Usage: ros-isolated-test report" in proc.stderr
+    assert "no 'build' folder" in proc.stderr
+    assert "Summary" not in proc.stdout
+
+
+def test_nonexistent_path_is_a_usage_error(env: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(["report", str(tmp_path / "no-such-folder")], env, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "no-such-folder" in proc.stderr
+    assert "does not exist" in proc.stderr
+    assert "Summary" not in proc.stdout
