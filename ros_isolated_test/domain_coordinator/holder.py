@@ -8,6 +8,7 @@ import os
 import pwd
 import shlex
 import socket
+import stat
 import tempfile
 import time
 from collections.abc import Sequence
@@ -58,6 +59,10 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
         host=socket.gethostname(),
     )
     path = record_path(lock_dir, domain_id)
+    if os.path.lexists(path) and not owned_file(path):
+        # Planted by someone else: root could rename over it, but never writes what
+        # it does not own. The reservation stands without a record.
+        raise PermissionError(f"{path} belongs to someone else")
     fd, temp_name = tempfile.mkstemp(dir=lock_dir, prefix=".holder-", suffix=".tmp")
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
@@ -76,9 +81,7 @@ def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:
     holders: list[Holder] = []
     for path in lock_dir.glob(f"domain-{domain_id}.uid*.holder.json"):
         try:
-            if path.is_symlink():
-                continue
-            data = json.loads(path.read_text(encoding="utf-8"))
+            data = json.loads(read_small_file(path))
             holders.append(
                 Holder(
                     domain_id=int(data["domain_id"]),
@@ -97,5 +100,26 @@ def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:
 
 def remove_record(path: Path) -> None:
     """Best effort: a stale record is harmless, ``status`` only trusts held locks."""
-    with contextlib.suppress(OSError):
-        path.unlink()
+    if owned_file(path):
+        with contextlib.suppress(OSError):
+            path.unlink()
+
+
+def owned_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file of ours (not a link, not someone else's)."""
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISREG(info.st_mode) and info.st_uid == os.getuid()
+
+
+def read_small_file(path: Path, limit: int = 64 * 1024) -> str:
+    """A small regular file's text; never follows a link, never blocks on a FIFO."""
+    fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path} is not a regular file")
+        return os.read(fd, limit).decode("utf-8")
+    finally:
+        os.close(fd)

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from filelock import lock_descriptor
 
-from ros_isolated_test.domain_coordinator.lock_dir import ensure_lock_dir
+from ros_isolated_test.domain_coordinator.holder import owned_file
+from ros_isolated_test.domain_coordinator.lock_dir import LockDirError, ensure_lock_dir
 
 QUEUE_DIR = "queue"
 
@@ -40,16 +41,25 @@ class Queue:
     def __init__(self, lock_dir: Path) -> None:
         self.path = lock_dir / QUEUE_DIR
 
+    def usable(self) -> bool:
+        """Whether the queue folder is a real folder (never followed through a link)."""
+        try:
+            return stat.S_ISDIR(os.lstat(self.path).st_mode)
+        except OSError:
+            return False
+
     def live_tickets(self) -> list[str]:
-        """Names of the tickets whose waiter is alive; dead ones are removed if we can."""
+        """Names of the tickets whose waiter is alive; our own dead ones are removed."""
         live: list[str] = []
+        if not self.usable():
+            return live
         with contextlib.suppress(OSError):
             for entry in os.scandir(self.path):
                 if not entry.name.endswith(".ticket"):
                     continue
                 if self._held(Path(entry.path)):
                     live.append(entry.name)
-                else:
+                elif owned_file(Path(entry.path)):
                     with contextlib.suppress(OSError):
                         os.unlink(entry.path)
         return sorted(live)
@@ -75,14 +85,22 @@ class Queue:
             os.close(fd)
 
     @contextlib.contextmanager
-    def ticket(self) -> Iterator[Ticket]:
-        """Take a place at the end of the queue for the ``with`` block."""
-        ensure_lock_dir(self.path)
-        name = f"{time.time_ns():020d}-{os.getpid()}.ticket"
-        path = self.path / name
-        fd = os.open(
-            path, os.O_RDONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644
-        )
+    def ticket(self) -> Iterator[Ticket | None]:
+        """Take a place at the end of the queue for the ``with`` block.
+
+        Yields None when the queue folder is unusable (something planted there): the
+        runner then still waits, only without the first-come-first-served order.
+        """
+        try:
+            ensure_lock_dir(self.path)
+            name = f"{time.time_ns():020d}-{os.getpid()}.ticket"
+            path = self.path / name
+            fd = os.open(
+                path, os.O_RDONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644
+            )
+        except (OSError, LockDirError):
+            yield None
+            return
         try:
             with contextlib.suppress(OSError):
                 os.fchmod(fd, 0o644)  # others must open it to see that it is held

@@ -66,7 +66,8 @@ class Reservation:
     """A held domain ID. Release it with :meth:`release` (or leave the ``with`` block)."""
 
     domain_id: int
-    lock_fd: int
+    #: None when every lock file for the ID was planted: the port alone guards it then.
+    lock_fd: int | None
     port: socket.socket
     record: Path | None
     lock_dir: Path
@@ -81,13 +82,18 @@ class Reservation:
             holder.remove_record(self.record)
         with contextlib.suppress(OSError):
             stamp = release_stamp(self.lock_dir, self.domain_id)
-            fd = os.open(stamp, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+            flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+            fd = os.open(stamp, flags, 0o644)
             try:
-                os.utime(fd)
+                info = os.fstat(fd)
+                # Only our own stamp: a file planted under its name is left alone.
+                if stat.S_ISREG(info.st_mode) and info.st_uid == os.getuid():
+                    os.utime(fd)
             finally:
                 os.close(fd)
         self.port.close()
-        os.close(self.lock_fd)
+        if self.lock_fd is not None:
+            os.close(self.lock_fd)
 
 
 def _open_lock_file(path: Path) -> int:
@@ -132,35 +138,51 @@ def _flock(fd: int) -> int | None:
     return None
 
 
+#: try_lock's answer when every lock file for the ID was planted.
+PORT_ONLY = -1
+
+
 def try_lock(lock_dir: Path, domain_id: int) -> int | None:
     """One non-blocking attempt at the ID's lock: the held descriptor, or None if busy.
 
-    A planted shared lock file is replaced by this user's own lock file for the ID; the
-    port every holder binds keeps two holders of one ID apart whichever file they use.
+    A planted shared lock file is replaced by this user's own lock file for the ID, and
+    if that was planted too, by the port alone (:data:`PORT_ONLY`): the port every holder
+    binds keeps two holders of one ID apart whichever file they use, so nobody can deny
+    an ID by planting files.
     """
-    try:
-        return _flock(_open_lock_file(lock_path(lock_dir, domain_id)))
-    except _Unusable:
+    for path in (lock_path(lock_dir, domain_id), own_lock_path(lock_dir, domain_id)):
         try:
-            return _flock(_open_lock_file(own_lock_path(lock_dir, domain_id)))
+            return _flock(_open_lock_file(path))
         except _Unusable:
-            return None
+            continue
+    return PORT_ONLY
 
 
-def probe_lock(lock_dir: Path, domain_id: int) -> bool | None:
-    """Whether the shared lock of the ID is held right now (None: no usable lock file)."""
-    path = lock_path(lock_dir, domain_id)
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
-    except OSError:
-        return None
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        return None
-    locked = _flock(fd)
-    if locked is None:
-        return True
-    os.close(locked)
+def _lock_files(lock_dir: Path, domain_id: int) -> list[Path]:
+    """The shared lock file of the ID and every user's own one."""
+    paths = [lock_path(lock_dir, domain_id)]
+    with contextlib.suppress(OSError):
+        prefix = f"domain-{domain_id}.uid"
+        for entry in os.scandir(lock_dir):
+            if entry.name.startswith(prefix) and entry.name.endswith(".lock"):
+                paths.append(Path(entry.path))
+    return paths
+
+
+def probe_lock(lock_dir: Path, domain_id: int) -> bool:
+    """Whether any lock file of the ID (shared, or a user's own) is held right now."""
+    for path in _lock_files(lock_dir, domain_id):
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+        except OSError:
+            continue
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            continue
+        locked = _flock(fd)
+        if locked is None:
+            return True
+        os.close(locked)
     return False
 
 
@@ -205,17 +227,17 @@ class DomainCoordinator:
         """
         ensure_lock_dir(self.lock_dir)
         for domain_id in self.candidates():
-            lock_fd = try_lock(self.lock_dir, domain_id)
-            if lock_fd is None:
+            found = try_lock(self.lock_dir, domain_id)
+            if found is None:
                 continue
+            lock_fd = None if found == PORT_ONLY else found
             port = port_guard.claim_port(domain_id)
-            if port is None:
-                os.close(lock_fd)
-                continue
-            if squatters.scan({domain_id}):
-                # A process took up the ID between the scan and the lock.
-                port.close()
-                os.close(lock_fd)
+            if port is None or squatters.scan({domain_id}):
+                # Taken through the port, or a process took the ID up since the scan.
+                if port is not None:
+                    port.close()
+                if lock_fd is not None:
+                    os.close(lock_fd)
                 continue
             try:
                 record: Path | None = holder.write_record(self.lock_dir, domain_id, command)
@@ -231,6 +253,7 @@ class DomainCoordinator:
         on_wait: Callable[[str], None] | None = None,
     ) -> Reservation:
         """Reserve an ID, waiting first come, first served while the pool is full."""
+        ensure_lock_dir(self.lock_dir)
         queue = Queue(self.lock_dir)
         if not queue.waiting():
             reservation = self.try_reserve(command)
@@ -243,7 +266,7 @@ class DomainCoordinator:
         with queue.ticket() as ticket:
             while True:
                 waited = time.monotonic() - start
-                ahead = ticket.ahead()
+                ahead = ticket.ahead() if ticket is not None else 0
                 if ahead == 0:
                     reservation = self.try_reserve(command)
                     if reservation is not None:
@@ -276,7 +299,7 @@ class DomainCoordinator:
 
     def _waiting_message(self, ahead: int, waited: float, limit: float) -> str:
         return (
-            f"waiting for a free ROS_DOMAIN_ID ({waited:.0f} s of {limit:.0f} s, "
+            f"waiting for a free ROS_DOMAIN_ID ({waited:.1f} s of {limit:g} s, "
             f"{ahead} runner(s) ahead): all {len(self.pool)} IDs of the pool are in use: "
             f"{self._holders()}"
         )
@@ -285,7 +308,8 @@ class DomainCoordinator:
         spent = f"after waiting {waited:.0f} s, " if how else ""
         return (
             f"{spent}no free ROS_DOMAIN_ID: all {len(self.pool)} IDs of the pool are in use "
-            f"({self._holders()}); run fewer tests at once (ctest -j), widen the pool with "
+            f"({self._holders()}; see ros-isolated-test status); run fewer tests at once "
+            "(ctest -j), widen the pool with "
             "ROS_ISOLATED_TEST_DOMAINS (e.g. '1-101,215-232'), or wait longer with "
             "--wait-timeout / ROS_ISOLATED_TEST_WAIT_TIMEOUT"
         )

@@ -45,6 +45,23 @@ def domain_value(text: str) -> int | None:
     return None
 
 
+def ancestors(pid: int, limit: int = 64) -> set[int]:
+    """The parent, grandparent, ... of ``pid`` (to tell a holder's own test from a squatter)."""
+    found: set[int] = set()
+    current = pid
+    for _ in range(limit):
+        try:
+            with open(f"/proc/{current}/stat", "rb") as handle:
+                data = handle.read()
+            current = int(data[data.rfind(b")") + 2 :].split()[1])
+        except (OSError, ValueError, IndexError):
+            break
+        if current <= 1 or current in found:
+            break
+        found.add(current)
+    return found
+
+
 def _boot_time() -> float:
     with contextlib.suppress(OSError, ValueError), open("/proc/stat", "rb") as handle:
         for line in handle:

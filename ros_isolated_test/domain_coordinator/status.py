@@ -44,12 +44,16 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
     held: list[HeldDomain] = []
     found = squatters.scan(candidates)
     for domain_id in sorted(candidates):
+        holders: set[int] = set()
         if probe_lock(lock_dir, domain_id):
             records = holder.read_records(lock_dir, domain_id)
             held.append(HeldDomain(domain_id, "lock", records[0] if records else None))
+            holders = {record.pid for record in records}
         elif port_guard.port_is_taken(domain_id):
             held.append(HeldDomain(domain_id, "port", None))
         for squatter in found.get(domain_id, ()):
+            if holders & squatters.ancestors(squatter.pid):
+                continue  # the holder's own test, not a squatter
             held.append(
                 HeldDomain(
                     domain_id,

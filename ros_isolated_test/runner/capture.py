@@ -50,7 +50,7 @@ class OutputCapture:
         try:
             self._console.write(data)
             self._console.flush()
-        except (BrokenPipeError, ValueError):
+        except (OSError, ValueError):
             # A closed console (a reader that went away) must not kill the test's run.
             pass
         if self._file is not None:

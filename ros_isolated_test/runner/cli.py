@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 from dataclasses import asdict
 from importlib import resources
@@ -60,6 +61,15 @@ def cli() -> None:
     """
 
 
+def _finite(value: float | None, name: str) -> float | None:
+    """Reject nan and inf, which FloatRange lets through."""
+    if value is not None and not math.isfinite(value):
+        raise click.BadParameter(
+            f"{value} is not a number of seconds (for {name} or {WAIT_TIMEOUT_ENV})"
+        )
+    return value
+
+
 @cli.command(
     context_settings={"ignore_unknown_options": True, "allow_interspersed_args": False},
     epilog=f"{EXIT_CODES_HELP}\n\b\nExample:\n  ros-isolated-test run --junit-xml out.xml -- "
@@ -85,6 +95,7 @@ def cli() -> None:
 @click.option(
     "--kill-grace",
     type=click.FloatRange(min=0),
+    callback=lambda _ctx, _param, value: _finite(value, "--kill-grace"),
     default=5.0,
     show_default=True,
     metavar="SECONDS",
@@ -93,6 +104,7 @@ def cli() -> None:
 @click.option(
     "--wait-timeout",
     type=click.FloatRange(min=0),
+    callback=lambda _ctx, _param, value: _finite(value, "--wait-timeout"),
     default=DEFAULT_WAIT_TIMEOUT,
     show_default=True,
     envvar=WAIT_TIMEOUT_ENV,

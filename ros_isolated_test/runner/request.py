@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -32,7 +33,7 @@ def wait_timeout_from_env(environ: Mapping[str, str] | None = None) -> float:
         value = float(text)
     except ValueError:
         value = -1.0
-    if not value >= 0 or value == float("inf"):
+    if not (value >= 0 and math.isfinite(value)):
         raise ValueError(
             f"{WAIT_TIMEOUT_ENV}={text!r} is not a number of seconds; set e.g. 600, or unset it"
         )

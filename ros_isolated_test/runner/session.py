@@ -262,17 +262,21 @@ def report_usage_error(message: str, result_file: Path | None, prog: str) -> int
 
 
 def _not_run(result: ResultFile, console: BinaryIO, message: str, kind: Outcome, code: int) -> int:
-    _error(console, message)
+    # The result file first: after a Ctrl-C the console may already be gone.
     result.properties["exit"] = "not run"
     result.write([result.case(kind, message)])
+    _error(console, message)
     return code
 
 
 def _error(console: BinaryIO, message: str) -> None:
     """One line on stderr, where CI and humans look for errors; flushed after stdout."""
-    with contextlib.suppress(BrokenPipeError, ValueError):
+    with contextlib.suppress(OSError, ValueError):
         console.flush()
-    print(f"ros-isolated-test: error: {message}", file=sys.stderr, flush=True)
+    with contextlib.suppress(OSError, ValueError):
+        # A reader that went away (ctest killed by the same Ctrl-C) loses nothing here:
+        # everything this says is in the result file already.
+        print(f"ros-isolated-test: error: {message}", file=sys.stderr, flush=True)
 
 
 def _open_output(path: Path | None) -> contextlib.AbstractContextManager[BinaryIO | None]:
