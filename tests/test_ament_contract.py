@@ -884,6 +884,7 @@ def test_no_free_domain_id_fails_without_running(
     """Upstream raises RuntimeError; we exit 3 with an error result that says what to do."""
     domain = 231
     env["ROS_ISOLATED_TEST_DOMAINS"] = str(domain)
+    env["ROS_ISOLATED_TEST_WAIT_TIMEOUT"] = "0"  # waiting has tests of its own
     port = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     try:
         with contextlib.suppress(OSError):  # already taken by someone else: just as good
@@ -897,7 +898,7 @@ def test_no_free_domain_id_fails_without_running(
     assert "ROS_ISOLATED_TEST_DOMAINS" in proc.stderr
     case = load_result(result).only
     assert case.outcome == "error"
-    assert "domain IDs of the pool are held" in case.message
+    assert "no free ROS_DOMAIN_ID: all 1 IDs of the pool are in use" in case.message
 
 
 def test_invalid_domain_pool_is_a_usage_error(

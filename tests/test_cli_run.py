@@ -410,9 +410,10 @@ def _start_and_terminate(argv: list[str], env: dict[str, str], cwd: Path) -> tup
 def test_sigterm_to_the_runner_is_passed_on_to_the_test(
     runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
 ) -> None:
-    """Documented in supervisor.py: SIGTERM (ctest, a container stop) is passed on.
+    """SIGTERM (ctest, a container stop) is passed on to the test.
 
-    The test handles it and exits 0, so the runner exits 0: it reports how the test ended.
+    Even when the test handles it and exits 0, the run was interrupted, not passed: the
+    runner exits 128+15 and the result names the signal.
     """
     result = tmp_path / "pkg" / "t.xml"
     command = [sys.executable, "-c", TRAPS_TERM]
@@ -432,8 +433,11 @@ def test_sigterm_to_the_runner_is_passed_on_to_the_test(
         ]
     code, output = _start_and_terminate(argv, env, tmp_path)
     assert (tmp_path / "got-term").read_text() == str(int(signal.SIGTERM))
-    assert code == 0, output
-    assert load_result(result).only.outcome == "passed"
+    assert code == 128 + signal.SIGTERM, output
+    case = load_result(result).only
+    assert case.outcome == "failure"
+    assert "was interrupted: the runner received SIGTERM" in case.message
+    assert "exited with code 0" in case.message
 
 
 def test_test_killed_by_forwarded_sigterm_is_reported(env: dict[str, str], tmp_path: Path) -> None:
@@ -444,7 +448,8 @@ def test_test_killed_by_forwarded_sigterm_is_reported(env: dict[str, str], tmp_p
     assert code == 128 + signal.SIGTERM, output
     case = load_result(result).only
     assert case.outcome == "failure"
-    assert "killed by SIGTERM (signal 15) after the runner received SIGTERM" in case.message
+    assert "the runner received SIGTERM, passed it on" in case.message
+    assert "was killed by SIGTERM" in case.message
 
 
 def test_status_lists_nothing_in_a_fresh_lock_dir(env: dict[str, str], tmp_path: Path) -> None:

@@ -446,6 +446,38 @@ def test_signal_to_the_runner_reaches_the_test_and_is_reported(
     assert_no_survivors(tag)
 
 
+def test_signal_as_the_test_starts_still_reaches_the_test(
+    tree_env: dict[str, str], tag: str, tmp_path: Path
+) -> None:
+    """Ctrl-C or a container stop can come at any moment, also just as the test starts.
+
+    The test signals its runner as its very first act, so the signal surely comes after
+    the test started: "it never ran" would be false, and its process left running. The
+    runner runs at batch priority on one CPU while the test (reset to normal priority)
+    starts, as on a loaded machine where the runner is descheduled just then.
+    """
+    cpu = min(os.sched_getaffinity(0))
+
+    def deprioritise() -> None:
+        os.sched_setaffinity(0, {cpu})
+        policy = os.SCHED_BATCH | os.SCHED_RESET_ON_FORK
+        os.sched_setscheduler(0, policy, os.sched_param(0))
+
+    for round_ in range(2):
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            result = tmp_path / f"{signum.name}-{round_}.xml"
+            script = f"kill -{signum.name[3:]} $PPID; exec sleep 30"
+            args = ["run", "--junit-xml", str(result), "--", "sh", "-c", script]
+            proc = run_cli(args, tree_env, cwd=tmp_path, preexec_fn=deprioritise)
+            output = proc.stdout + proc.stderr
+            survivors = tagged(tag)
+            assert not survivors, f"{signum.name}: left running:\n{describe(survivors)}\n{output}"
+            message = interruption(result)
+            assert "never ran" not in message, f"{signum.name}: the test did run:\n{output}"
+            assert "interrupted" in message and signum.name in message, message
+            assert proc.returncode == 128 + signum, output
+
+
 def test_child_ignoring_sigterm_is_killed_after_the_grace(
     tree_env: dict[str, str], launcher: Launcher, tag: str, tmp_path: Path
 ) -> None:
