@@ -386,10 +386,8 @@ def test_orphans_of_a_killed_runner_keep_their_id_from_other_tests(
     tree_env: dict[str, str], domain: int, launcher: Launcher, tag: str, tmp_path: Path
 ) -> None:
     script = "sleep 60 & echo $! > child.pid; echo $$ > main.pid; exec sleep 60"
-    runner = launcher.start(
-        [CLI, "run", "--", "sh", "-c", script], tree_env, tmp_path / "runner.log", cwd=tmp_path
-    )
     log = tmp_path / "runner.log"
+    runner = launcher.start([CLI, "run", "--", "sh", "-c", script], tree_env, log, cwd=tmp_path)
     child = wait_for_pid(tmp_path / "child.pid", process=runner, log=log)
     wait_for_pid(tmp_path / "main.pid", process=runner, log=log)
     os.kill(runner.pid, signal.SIGKILL)

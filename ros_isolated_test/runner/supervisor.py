@@ -56,8 +56,7 @@ class Outcome:
 class _Signals:
     """Signal handlers for the test's lifetime: pass the signal on, remember it."""
 
-    def __init__(self, process: subprocess.Popen[bytes]) -> None:
-        self.process = process
+    def __init__(self) -> None:
         self.received: int | None = None
         self.at: float | None = None
         self._previous: dict[int, object] = {}
@@ -102,13 +101,17 @@ def run(
     """Run ``command`` to its end and its tree's end, streaming its output into ``capture``."""
     reaper.become_subreaper()
     start = time.monotonic()
-    try:
-        process = subprocess.Popen(
-            list(command), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=dict(env)
-        )
-    except OSError as error:
-        return Outcome(returncode=None, duration=time.monotonic() - start, start_error=error)
-    with _Signals(process) as signals:
+    # Handlers before the test exists: a signal arriving as it starts must reach it too.
+    with _Signals() as signals:
+        try:
+            process = subprocess.Popen(
+                list(command), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=dict(env)
+            )
+        except OSError as error:
+            return Outcome(returncode=None, duration=time.monotonic() - start, start_error=error)
+        if signals.received is not None:
+            # It came while the test was being started, before it could be passed on.
+            process_tree.signal_tree(process.pid, signals.received)
         timed_out = _pump(process, capture, start, timeout, kill_grace, signals)
         returncode = process.wait()
         leftovers = _end_leftovers(kill_grace)

@@ -1,0 +1,232 @@
+"""What every benchmark shares: the two runners, one environment, timing, statistics, tables.
+
+Both runners are always started the same way, by the same interpreter (the one running
+the benchmarks), with the same environment, so that the only difference measured is the
+runner itself. Everything a run leaves behind goes into one temporary directory.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+REPO = Path(__file__).resolve().parent.parent
+OURS = "ours"
+UPSTREAM = "upstream"
+RUNNERS = (OURS, UPSTREAM)
+#: Variables that change what either runner decides; the benchmarks set them explicitly.
+POLICY_VARS = (
+    "ROS_DOMAIN_ID",
+    "DISABLE_ROS_ISOLATION",
+    "ROS_ISOLATED_TEST_DOMAINS",
+    "ROS_ISOLATED_TEST_LOCK_DIR",
+    "ROS_ISOLATED_TEST_WAIT_TIMEOUT",
+)
+#: Set by the ROS wheels' .pth hook once it has re-executed the interpreter.
+BOOTSTRAP_MARK = "_ROS_WHEELS_BOOTSTRAP_COMPLETE"
+PACKAGE = "bench"
+
+
+def upstream_runner_path() -> Path:
+    """ament_cmake_ros's run_test_isolated.py under this interpreter's prefix."""
+    return Path(sys.prefix) / "share" / "ament_cmake_ros" / "cmake" / "run_test_isolated.py"
+
+
+def ours_runner_path() -> Path:
+    """What ``ros-isolated-test runner-path`` prints, asked of this very interpreter."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "ros_isolated_test", "runner-path"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    )
+    return Path(proc.stdout.strip())
+
+
+def base_environment(work: Path) -> dict[str, str]:
+    """The environment both runners get: no domain policy, a private lock directory.
+
+    ``PYTHONDONTWRITEBYTECODE`` is dropped so that modules are imported from cached
+    bytecode, as they are from an installed package; otherwise every runner start would
+    compile its modules from source and the benchmark would measure the compiler.
+    """
+    env = {key: value for key, value in os.environ.items() if key not in POLICY_VARS}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env["ROS_ISOLATED_TEST_LOCK_DIR"] = str(work / "locks")
+    bin_dir = str(Path(sys.executable).parent)
+    env["PATH"] = os.pathsep.join(p for p in (bin_dir, env.get("PATH", "")) if p)
+    return env
+
+
+@dataclass(frozen=True)
+class Context:
+    """Where the runners are, which environment they get, and how long to measure."""
+
+    python: str
+    runners: Mapping[str, Path]
+    work: Path
+    env: Mapping[str, str]
+    quick: bool
+
+    def runner_command(
+        self, runner: str, result: Path, command: Sequence[str], generate: bool = True
+    ) -> list[str]:
+        """Exactly what ctest runs: ``python -u RUNNER RESULT --package-name P ... --command``."""
+        flags = ["--generate-result-on-success"] if generate else []
+        return [
+            self.python,
+            "-u",
+            str(self.runners[runner]),
+            str(result),
+            "--package-name",
+            PACKAGE,
+            *flags,
+            "--command",
+            *command,
+        ]
+
+    def environment(self, **extra: str) -> dict[str, str]:
+        """The shared environment plus ``extra``."""
+        env = dict(self.env)
+        env.update(extra)
+        return env
+
+    def scratch(self, name: str) -> Path:
+        """A fresh directory under the work directory."""
+        path = self.work / name
+        path.mkdir(parents=True, exist_ok=True)
+        return path
+
+
+@dataclass(frozen=True)
+class Timed:
+    """One finished process: wall time, exit code, peak RSS of it and its descendants."""
+
+    seconds: float
+    returncode: int
+    max_rss_kib: int
+
+
+def run_timed(
+    command: Sequence[str],
+    env: Mapping[str, str],
+    stdout: int | IO[bytes] | None = subprocess.DEVNULL,
+    cwd: Path | None = None,
+) -> Timed:
+    """Run to completion; wall time from just before the fork to the reaping wait4.
+
+    wait4's rusage gives ru_maxrss for the process itself, or for a descendant it
+    waited for if that one grew bigger: here that is the runner, whose test command
+    (a shell, ``yes``, ``head``, ``true``) stays at a few MB.
+    """
+    start = time.perf_counter()
+    proc = subprocess.Popen(
+        list(command),
+        env=dict(env),
+        stdin=subprocess.DEVNULL,
+        stdout=stdout,
+        stderr=subprocess.STDOUT,
+        cwd=cwd,
+    )
+    _, status, usage = os.wait4(proc.pid, 0)
+    seconds = time.perf_counter() - start
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return Timed(seconds, proc.returncode, int(usage.ru_maxrss))
+
+
+def interleaved(reps: int, runners: Sequence[str] = RUNNERS) -> Iterator[tuple[int, str]]:
+    """(repetition, runner) pairs, the order flipped every repetition (ABBA...).
+
+    Alternating which runner goes first cancels slow drift in the machine's load.
+    """
+    for rep in range(reps):
+        order = runners if rep % 2 == 0 else tuple(reversed(runners))
+        for runner in order:
+            yield rep, runner
+
+
+def median(values: Sequence[float]) -> float:
+    """Median; NaN for no values (shown as a dash)."""
+    return statistics.median(values) if values else float("nan")
+
+
+def percentile(values: Sequence[float], pct: float) -> float:
+    """Linear-interpolated percentile (``pct`` in 0..100); NaN for no values."""
+    if not values:
+        return float("nan")
+    ordered = sorted(values)
+    rank = (len(ordered) - 1) * pct / 100.0
+    low = int(rank)
+    high = min(low + 1, len(ordered) - 1)
+    return ordered[low] + (ordered[high] - ordered[low]) * (rank - low)
+
+
+def ms(seconds: float) -> str:
+    """Seconds shown as milliseconds."""
+    if seconds != seconds:  # NaN
+        return "-"
+    return f"{seconds * 1000:.0f} ms" if seconds >= 0.01 else f"{seconds * 1000:.1f} ms"
+
+
+def secs(seconds: float) -> str:
+    """Seconds shown as seconds."""
+    if seconds != seconds:
+        return "-"
+    return f"{seconds:.2f} s"
+
+
+def ratio(ours: float, upstream: float) -> str:
+    """ours / upstream, the number the table is about."""
+    if ours != ours or upstream != upstream or upstream <= 0:
+        return "-"
+    return f"{ours / upstream:.2f}"
+
+
+def startup_seconds(env: Mapping[str, str], reps: int, reexec: bool) -> float:
+    """Median wall time of ``python -u -c pass`` in this venv.
+
+    ``reexec=True`` clears the ROS wheels' bootstrap mark so the interpreter re-executes
+    itself once, as from a fresh shell; without it the mark is inherited, as it is by
+    every process under colcon (colcon is a Python of this venv).
+    """
+    run_env = dict(env)
+    if reexec:
+        run_env.pop(BOOTSTRAP_MARK, None)
+    else:
+        run_env[BOOTSTRAP_MARK] = "1"
+    times = [run_timed([sys.executable, "-u", "-c", "pass"], run_env).seconds for _ in range(reps)]
+    return median(times)
+
+
+@dataclass
+class Section:
+    """One benchmark's part of the report: a table, then notes under it."""
+
+    title: str
+    header: Sequence[str]
+    rows: list[Sequence[str]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def render(self) -> str:
+        """Markdown, so the output can be pasted into the README as it is."""
+        lines = [f"### {self.title}", ""]
+        lines.append("| " + " | ".join(self.header) + " |")
+        lines.append("|" + "|".join("---" for _ in self.header) + "|")
+        lines.extend("| " + " | ".join(row) + " |" for row in self.rows)
+        if self.notes:
+            lines.append("")
+            lines.extend(self.notes)
+        return "\n".join(lines)
+
+
+def progress(message: str) -> None:
+    """Say what runs now, on stderr, so the table on stdout stays clean."""
+    print(f"[bench] {message}", file=sys.stderr, flush=True)

@@ -1,0 +1,223 @@
+"""1. Per-test overhead: what wrapping a test that does nothing costs, ours against upstream.
+
+Every ctest test pays this once, so it is the floor of any suite's cost. The wall time
+is split into interpreter start-up (``python -u -c pass`` in the same venv, which no
+runner can avoid) and the runner's own work; an in-process timer splits the latter into
+imports and the run itself, and ``-X importtime`` names the imports that cost the most.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+from common import (
+    OURS,
+    RUNNERS,
+    UPSTREAM,
+    Context,
+    Section,
+    interleaved,
+    median,
+    ms,
+    progress,
+    ratio,
+    run_timed,
+)
+
+NOOP = ("true",)
+#: Own work (runner wall minus interpreter start-up) the issue allows us.
+OWN_WORK_TARGET = 0.020
+
+#: Runs a runner script by path after importing what it imports, timing both parts.
+_PROBE = r"""
+import runpy, sys, time
+kind, script, timing = sys.argv[1:4]
+t0 = time.perf_counter()
+if kind == "ours":
+    import ros_isolated_test.runner.ament_args
+else:
+    import ament_cmake_test, domain_coordinator
+t1 = time.perf_counter()
+sys.argv = [script, *sys.argv[4:]]
+code = 0
+try:
+    runpy.run_path(script, run_name="__main__")
+except SystemExit as stop:
+    code = stop.code
+t2 = time.perf_counter()
+with open(timing, "w") as handle:
+    handle.write(f"{t1 - t0} {t2 - t1}")
+sys.exit(code)
+"""
+
+
+@dataclass(frozen=True)
+class ImportEdge:
+    """A module outside ros_isolated_test, and the module (ours or the script) importing it."""
+
+    module: str
+    importer: str
+
+
+def _importtime(lines: list[str]) -> list[tuple[int, str, int, int]]:
+    """Parse ``-X importtime`` lines into (level, module, self µs, cumulative µs).
+
+    A line reads ``import time: SELF | CUMULATIVE | <two spaces per level>NAME``.
+    """
+    parsed = []
+    for line in lines:
+        if not line.startswith("import time:") or "imported package" in line:
+            continue
+        fields = line.split(":", 1)[1].split("|")
+        if len(fields) != 3:
+            continue
+        self_us, cumulative, name = fields
+        level = (len(name) - len(name.lstrip(" ")) - 1) // 2
+        parsed.append((level, name.strip(), int(self_us), int(cumulative)))
+    return parsed
+
+
+def import_profile(ctx: Context, reps: int) -> tuple[list[tuple[ImportEdge, float]], float, float]:
+    """Where our runner's import time goes, from ``-X importtime`` of a real no-op run.
+
+    Returns the imports that ros_isolated_test (or the runner script) pulls in from
+    outside itself, heaviest first with their cumulative time, then the self time of
+    our own modules, then the total. Modules the interpreter already loads at start-up
+    (``python -c pass``) are left out: every Python process pays for them.
+    """
+    startup = subprocess.run(
+        [ctx.python, "-X", "importtime", "-c", "pass"],
+        env=ctx.environment(),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    preloaded = {name for _, name, _, _ in _importtime(startup.stderr.splitlines())}
+    edges: dict[ImportEdge, list[float]] = defaultdict(list)
+    own: list[float] = []
+    totals: list[float] = []
+    result = ctx.scratch("overhead") / "importtime.xml"
+    for _ in range(reps):
+        proc = subprocess.run(
+            [ctx.python, "-X", "importtime", *ctx.runner_command(OURS, result, NOOP)[1:]],
+            env=ctx.environment(),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            check=False,
+        )
+        entries = [e for e in _importtime(proc.stderr.splitlines()) if e[1] not in preloaded]
+        # -X importtime prints children before their parent: walk backwards with a stack.
+        stack: list[tuple[int, str]] = []
+        own_us = 0
+        total_us = 0
+        for level, name, self_us, cumulative in reversed(entries):
+            while stack and stack[-1][0] >= level:
+                stack.pop()
+            importer = stack[-1][1] if stack else "the runner script (or a lazy import)"
+            stack.append((level, name))
+            if level == 0:
+                total_us += cumulative
+            if name.startswith("ros_isolated_test"):
+                own_us += self_us
+            elif importer.startswith("ros_isolated_test") or level == 0:
+                edges[ImportEdge(name, importer)].append(cumulative / 1e6)
+        own.append(own_us / 1e6)
+        totals.append(total_us / 1e6)
+    heaviest = sorted(
+        ((edge, median(times)) for edge, times in edges.items()), key=lambda item: -item[1]
+    )
+    return heaviest, median(own), median(totals)
+
+
+def _probe(ctx: Context, runner: str, timing: Path) -> tuple[float, float] | None:
+    result = ctx.scratch("overhead") / f"probe-{runner}.xml"
+    command = ctx.runner_command(runner, result, NOOP)
+    probe = [ctx.python, "-u", "-c", _PROBE, runner, command[2], str(timing), *command[3:]]
+    outcome = run_timed(probe, ctx.environment())
+    if outcome.returncode != 0:
+        return None
+    imports, rest = (float(part) for part in timing.read_text().split())
+    return imports, rest
+
+
+def run(ctx: Context) -> Section:
+    """Time the no-op test through each runner, interleaved; split ours into its parts."""
+    reps = 5 if ctx.quick else 31
+    probe_reps = 3 if ctx.quick else 11
+    scratch = ctx.scratch("overhead")
+    env = ctx.environment()
+    startup_command = [ctx.python, "-u", "-c", "pass"]
+    progress(f"overhead: warming up, then {reps} interleaved no-op runs per runner")
+    for runner in RUNNERS:  # warm-up: bytecode caches and the page cache
+        run_timed(ctx.runner_command(runner, scratch / f"warm-{runner}.xml", NOOP), env)
+    walls: dict[str, list[float]] = {runner: [] for runner in RUNNERS}
+    startups: list[float] = []
+    failures: dict[str, int] = {runner: 0 for runner in RUNNERS}
+    for _, runner in interleaved(reps):
+        outcome = run_timed(ctx.runner_command(runner, scratch / f"{runner}.xml", NOOP), env)
+        walls[runner].append(outcome.seconds)
+        if outcome.returncode != 0 or not (scratch / f"{runner}.xml").is_file():
+            failures[runner] += 1
+        if runner == UPSTREAM:
+            startups.append(run_timed(startup_command, env).seconds)
+    parts: dict[str, tuple[list[float], list[float]]] = {r: ([], []) for r in RUNNERS}
+    for _, runner in interleaved(probe_reps):
+        measured = _probe(ctx, runner, scratch / f"timing-{runner}.txt")
+        if measured is not None:
+            parts[runner][0].append(measured[0])
+            parts[runner][1].append(measured[1])
+    progress("overhead: import profile of ours (-X importtime)")
+    heaviest, own_modules, import_total = import_profile(ctx, 3)
+
+    startup = median(startups)
+    wall = {runner: median(walls[runner]) for runner in RUNNERS}
+    own = {runner: wall[runner] - startup for runner in RUNNERS}
+    section = Section(
+        f"1. Per-test overhead: a no-op test (`true`, --generate-result-on-success), "
+        f"{reps} runs each, interleaved",
+        ("", "ours", "upstream", "ours / upstream"),
+    )
+    section.rows.append(
+        ("wall time per test (median)", ms(wall[OURS]), ms(wall[UPSTREAM]), ratio(*wall.values()))
+    )
+    section.rows.append(("interpreter start-up (`python -u -c pass`)", ms(startup), ms(startup), ""))
+    section.rows.append(
+        ("the runner's own work (wall - start-up)", ms(own[OURS]), ms(own[UPSTREAM]),
+         ratio(own[OURS], own[UPSTREAM]))
+    )  # fmt: skip
+    section.rows.append(
+        (f"... of which imports (in-process timer, median of {probe_reps})",
+         ms(median(parts[OURS][0])), ms(median(parts[UPSTREAM][0])),
+         ratio(median(parts[OURS][0]), median(parts[UPSTREAM][0])))
+    )  # fmt: skip
+    section.rows.append(
+        ("... of which the run: arguments, domain ID, `true`, result file",
+         ms(median(parts[OURS][1])), ms(median(parts[UPSTREAM][1])),
+         ratio(median(parts[OURS][1]), median(parts[UPSTREAM][1])))
+    )  # fmt: skip
+    verdict = "met" if wall[OURS] <= wall[UPSTREAM] else "NOT met"
+    own_verdict = "met" if own[OURS] < OWN_WORK_TARGET else "NOT met"
+    section.notes.append(
+        f"Targets: ours / upstream at most 1.00 ({verdict}); our own work under "
+        f"{OWN_WORK_TARGET * 1000:.0f} ms ({own_verdict})."
+    )
+    for runner, count in failures.items():
+        if count:
+            section.notes.append(f"**{count} of {reps} {runner} runs failed.**")
+    if heaviest:
+        listed = ", ".join(
+            f"{edge.module} {seconds * 1000:.0f} ms (imported by {edge.importer})"
+            for edge, seconds in heaviest[:8]
+        )
+        section.notes.append(
+            f"Where our imports go (`-X importtime`, median of 3, which inflates every "
+            f"figure; modules `python -c pass` already loads left out): "
+            f"{import_total * 1000:.0f} ms in all, {own_modules * 1000:.0f} ms in "
+            f"ros_isolated_test's own modules; heaviest imports from outside it: {listed}."
+        )
+    return section
+
