@@ -7,12 +7,13 @@ everything after ``--command`` is the test's command line, options included.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from ros_isolated_test.runner import exit_codes, session
+from ros_isolated_test.runner import discovery, exit_codes, session
 from ros_isolated_test.runner.request import (
     EnvAssignment,
     Mode,
@@ -134,12 +135,16 @@ def parse(argv: Sequence[str]) -> RunRequest:
         raise UsageError(str(error), args.result_file) from None
     try:
         wait_timeout = wait_timeout_from_env()
+        override = os.environ.get(discovery.OVERRIDE_ENV, "").strip() or None
+        if override is not None:
+            override = discovery.check_range(override, discovery.OVERRIDE_ENV)
     except ValueError as error:
         raise UsageError(str(error), args.result_file) from None
     return RunRequest(
         command=tuple(command),
         mode=Mode.AMENT,
         wait_timeout=wait_timeout,
+        discovery_range=override,
         result_file=args.result_file,
         package_name=args.package_name,
         output_file=args.output_file,

@@ -112,6 +112,14 @@ def _finite(value: float | None, name: str) -> float | None:
     help=f"When every ID is in use, wait this long for one (first come, first served; "
     f"env {WAIT_TIMEOUT_ENV}); 0 fails at once.",
 )
+@click.option(
+    "--discovery-range",
+    type=click.Choice(["LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT"], case_sensitive=False),
+    envvar="ROS_ISOLATED_TEST_DISCOVERY_RANGE",
+    help="How far the test's DDS discovery reaches (env ROS_ISOLATED_TEST_DISCOVERY_RANGE). "
+    "Default: LOCALHOST, unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; SUBNET for tests that "
+    "need other hosts or more than 32 processes.",
+)
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
     junit_xml: Path | None,
@@ -120,6 +128,7 @@ def run(
     timeout: float | None,
     kill_grace: float,
     wait_timeout: float,
+    discovery_range: str | None,
     command: tuple[str, ...],
 ) -> None:
     """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
@@ -140,6 +149,7 @@ def run(
         timeout=timeout,
         kill_grace=kill_grace,
         wait_timeout=wait_timeout,
+        discovery_range=discovery_range.upper() if discovery_range else None,
     )
     sys.exit(session.run(request))
 

@@ -10,6 +10,7 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+from ros_isolated_test.runner import discovery
 from ros_isolated_test.runner.request import EnvAssignment
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
@@ -31,10 +32,13 @@ class Policy:
     env: dict[str, str]
     #: Lines to print before the test starts (variables set, loud warnings).
     notes: tuple[str, ...]
+    #: How far discovery reaches; None when isolation is disabled (nothing is changed).
+    discovery: discovery.Discovery | None = None
 
     def for_domain(self, domain_id: int) -> dict[str, str]:
         """The test's environment once ``domain_id`` is held."""
-        return {**self.env, DOMAIN_VAR: str(domain_id)}
+        env = self.discovery.apply(self.env) if self.discovery is not None else self.env
+        return {**env, DOMAIN_VAR: str(domain_id)}
 
 
 def isolation_disabled(environ: Mapping[str, str]) -> bool:
@@ -75,8 +79,12 @@ def decide(
     assignments: Sequence[EnvAssignment],
     environ: Mapping[str, str] | None = None,
     env_origin: str = "--env",
+    discovery_range: str | None = None,
 ) -> Policy:
-    """Build the test's environment, or raise :class:`RefusedError` for a preset domain."""
+    """Build the test's environment, or raise :class:`RefusedError` for a preset domain.
+
+    Raises :class:`~ros_isolated_test.runner.discovery.DiscoveryError` for a bad range.
+    """
     environ = os.environ if environ is None else environ
     env, notes = apply_assignments(environ, assignments)
     disabled = isolation_disabled(environ)
@@ -99,7 +107,8 @@ def decide(
                 f"(unset {DOMAIN_VAR}) and the runner picks a free ID, or set "
                 f"{DISABLE_VAR}=1 to run without isolation"
             )
-        return Policy(isolate=True, env=env, notes=tuple(notes))
+        confined = discovery.decide(env, discovery_range)
+        return Policy(isolate=True, env=env, notes=tuple(notes), discovery=confined)
     domain = env.get(DOMAIN_VAR)
     where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
     warning = (

@@ -73,6 +73,8 @@ class RunRequest:
     generate_result_on_success: bool = False
     timeout: float | None = None
     kill_grace: float = 5.0
+    #: --discovery-range (or its variable); None: the runner's default policy.
+    discovery_range: str | None = None
     #: How long to wait for a free ID when the pool is full, in seconds.
     wait_timeout: float = DEFAULT_WAIT_TIMEOUT
     #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).

@@ -25,6 +25,7 @@ from ros_isolated_test.domain_coordinator import (
 )
 from ros_isolated_test.runner import environment, exit_codes, normaliser, supervisor
 from ros_isolated_test.runner.capture import OutputCapture
+from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.junit_model import Outcome
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.result_file import NO_RESULT, ResultFile
@@ -62,9 +63,13 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
         result.write([result.case(Outcome.SKIPPED, "Test skipped by developer (SKIP_TEST)")])
         return exit_codes.PASSED
     try:
-        policy = environment.decide(request.env, env_origin=request.env_origin)
+        policy = environment.decide(
+            request.env, env_origin=request.env_origin, discovery_range=request.discovery_range
+        )
     except environment.RefusedError as refusal:
         return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
+    except DiscoveryError as error:
+        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
     result.write_placeholder()
     try:
         with _interruptible(), _domain(policy, request, capture) as domain_id:
@@ -72,6 +77,11 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
                 result.properties["ros_domain_id"] = str(domain_id)
                 env = policy.for_domain(domain_id)
+                if policy.discovery is not None:
+                    capture.note(policy.discovery.describe())
+                    for warning in policy.discovery.warnings:
+                        capture.note(warning)
+                    result.properties.update(policy.discovery.properties())
             else:
                 result.properties["ros_domain_id"] = policy.env.get(
                     environment.DOMAIN_VAR, "unset (0)"
