@@ -64,13 +64,12 @@ def cases_from(read: ReadResult, package: str | None, fallback: str) -> list[Cas
             "test cases show; the producer reported them nowhere else."
         )
         cases.append(
-            Case(
-                classname=prefixed(package, fallback),
-                name="unreported failures",
-                outcome=Outcome.ERROR,
-                message=message,
-                text=message,
-                type="CountMismatch",
+            Case.saying(
+                prefixed(package, fallback),
+                "unreported failures",
+                Outcome.ERROR,
+                message,
+                "CountMismatch",
             )
         )
     return merge_duplicates(cases)
@@ -119,13 +118,8 @@ def damage_case(read: ReadResult, package: str | None, fallback: str) -> Case:
     message = f"Invalid result file {read.path.name}, not fully readable: {detail}."
     if kept:
         message += f" {kept} test case(s) before the damage were kept."
-    return Case(
-        classname=prefixed(package, fallback),
-        name="result file",
-        outcome=Outcome.ERROR,
-        message=message,
-        text=message,
-        type="BrokenResultFile",
+    return Case.saying(
+        prefixed(package, fallback), "result file", Outcome.ERROR, message, "BrokenResultFile"
     )
 
 
@@ -265,11 +259,4 @@ def exit_case(classname: str, reason: str, all_passed: bool) -> Case:
     """
     message = f"The test process {reason}"
     message += ", although every test case it reported passed." if all_passed else "."
-    return Case(
-        classname=classname,
-        name="test process exit",
-        outcome=Outcome.FAILURE,
-        message=message,
-        text=message,
-        type="ExitStatus",
-    )
+    return Case.saying(classname, "test process exit", Outcome.FAILURE, message, "ExitStatus")

@@ -57,14 +57,9 @@ class ResultFile:
 
     def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
         """The test as one case, for a test that wrote no result of its own."""
-        return Case(
-            classname=self.suite_name,
-            name=self.request.test_name,
-            time=duration,
-            outcome=outcome,
-            message=message,
-            text=message,
-        )
+        case = Case.saying(self.suite_name, self.request.test_name, outcome, message)
+        case.time = duration
+        return case
 
     @property
     def suite_name(self) -> str:

@@ -169,13 +169,12 @@ def _internal_error(suite: Suite, found: list[str]) -> Suite:
         f"report it). The test had {len(suite.cases)} case(s), {failed} failed or errored. "
         f"Schema problems: {'; '.join(found[:5])}"
     )
-    case = Case(
-        classname=name_token(suite.name, "ros_isolated_test.result"),
-        name="result file",
-        outcome=Outcome.ERROR,
-        message=message,
-        text=message,
-        type="InternalError",
+    case = Case.saying(
+        name_token(suite.name, "ros_isolated_test.result"),
+        "result file",
+        Outcome.ERROR,
+        message,
+        "InternalError",
     )
     return Suite(
         name=suite.name,
