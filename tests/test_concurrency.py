@@ -153,14 +153,14 @@ def crowd(tmp_path: Path, env: dict[str, str], lock_dir: Path) -> Iterator[Crowd
 
 
 def _table_rows(stdout: str) -> dict[int, tuple[int, str, str, str]]:
-    """The rows of held locks; rows of ports other programs hold on this machine are skipped."""
+    """The rows of runners; ports and squatters elsewhere on this machine are skipped."""
     rows = {}
     for line in stdout.splitlines()[1:]:
-        if "port 32768+ID taken" in line:
-            continue
-        match = re.match(r"^\s*(\d+)\s+(\d+)\s+(\S+)\s+(\S+)\s+(.*)$", line)
+        match = re.match(r"^\s*(\d+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(.*)$", line)
         assert match, f"unexpected status line: {line!r}"
-        domain_id, pid, user, started, command = match.groups()
+        domain_id, kind, pid, user, started, command = match.groups()
+        if kind != "runner":
+            continue
         rows[int(domain_id)] = (int(pid), user, started, command)
     return rows
 
@@ -198,7 +198,15 @@ def test_fifty_runners_at_once_hold_fifty_distinct_ids(crowd: Crowd, env: dict[s
 
     table = run_cli(["status"], status_env)
     assert table.returncode == 0, table.stderr
-    assert table.stdout.splitlines()[0].split() == ["ID", "PID", "USER", "STARTED", "COMMAND"]
+    assert table.stdout.splitlines()[0].split() == [
+        "ID",
+        "HELD",
+        "BY",
+        "PID",
+        "USER",
+        "STARTED",
+        "COMMAND",
+    ]
     table_rows = _table_rows(table.stdout)
     assert set(table_rows) == set(ids)
     for domain_id, row in by_id.items():

@@ -171,10 +171,13 @@ def runner_path() -> None:
 @cli.command()
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of a table.")
 def status(as_json: bool) -> None:
-    """List every domain ID of the pool that is held on this machine, and by whom.
+    """List every domain ID in use on this machine, and by whom.
 
-    IDs held through their TCP port only (32768+ID) are held by upstream's
-    domain_coordinator or another program; they are skipped too.
+    HELD BY is "runner" (a ros-isolated-test runner holds its lock), "port" (its TCP
+    port 32768+ID is bound: upstream's domain_coordinator or another program) or
+    "squatter" (a live process has ROS_DOMAIN_ID=<id> in its environment without
+    holding it: a test that outlived its runner, a shell's export). The coordinator
+    skips all of them.
     """
     lock_dir = lock_dir_from_env()
     try:
@@ -196,17 +199,19 @@ def status(as_json: bool) -> None:
     if not held:
         click.echo(f"No domain ID of the pool is held (lock directory {lock_dir}).")
         return
-    click.echo(f"{'ID':>3}  {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
+    click.echo(f"{'ID':>3}  {'HELD BY':<8} {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
+    kinds = {"lock": "runner", "port": "port", "environment": "squatter"}
     for item in held:
+        kind = kinds.get(item.via, item.via)
         if item.holder is None:
             who = "port 32768+ID taken (upstream domain_coordinator or another program)"
             if item.via == "lock":
                 who = "held (no holder record)"
-            click.echo(f"{item.domain_id:>3}  {'-':>7}  {'-':<10} {'-':<19}  {who}")
+            click.echo(f"{item.domain_id:>3}  {kind:<8} {'-':>7}  {'-':<10} {'-':<19}  {who}")
             continue
         holder = item.holder
         click.echo(
-            f"{item.domain_id:>3}  {holder.pid:>7}  {holder.user:<10.10} "
+            f"{item.domain_id:>3}  {kind:<8} {holder.pid:>7}  {holder.user:<10.10} "
             f"{holder.started_iso:<19}  {holder.command}"
         )
 
