@@ -136,8 +136,6 @@ def parse(argv: Sequence[str]) -> RunRequest:
     try:
         wait_timeout = wait_timeout_from_env()
         override = os.environ.get(discovery.OVERRIDE_ENV, "").strip() or None
-        if override is not None:
-            override = discovery.check_range(override, discovery.OVERRIDE_ENV)
     except ValueError as error:
         raise UsageError(str(error), args.result_file) from None
     return RunRequest(

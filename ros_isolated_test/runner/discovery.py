@@ -15,6 +15,7 @@ RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 LOCALHOST_ONLY_VAR = "ROS_LOCALHOST_ONLY"
 PEERS_VAR = "ROS_STATIC_PEERS"
 OVERRIDE_ENV = "ROS_ISOLATED_TEST_DISCOVERY_RANGE"
+OVERRIDE_ORIGIN = f"--discovery-range / {OVERRIDE_ENV}"
 RANGES = ("LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT")
 DEFAULT_RANGE = "LOCALHOST"
 #: Distributions from before ROS_AUTOMATIC_DISCOVERY_RANGE (Iron added it).
@@ -72,8 +73,12 @@ def check_range(value: str, origin: str) -> str:
 
 def _users_choice(env: Mapping[str, str], humble: bool) -> tuple[str, str] | None:
     """The range the user's own variables already set, which the runner respects."""
-    only = env.get(LOCALHOST_ONLY_VAR, "").strip()
-    if humble and only:
+    # ROS compares the exact string: " 1 " is not "1", and confines nothing.
+    only = env.get(LOCALHOST_ONLY_VAR)
+    if humble:
+        # Humble reads only ROS_LOCALHOST_ONLY; a range variable there changes nothing.
+        if only is None:
+            return None
         return ("LOCALHOST" if only == "1" else "SUBNET"), f"{LOCALHOST_ONLY_VAR} set by the user"
     if only == "1":
         # Deprecated but still honoured, and it overrides the range: report what holds.
@@ -107,7 +112,7 @@ def decide(env: Mapping[str, str], override: str | None) -> Discovery:
             return Discovery(users[0], users[1], peers=peers, warnings=warnings)
         chosen, source = DEFAULT_RANGE, "set by the runner"
     else:
-        chosen, source = check_range(override, "--discovery-range"), "--discovery-range"
+        chosen, source = check_range(override, OVERRIDE_ORIGIN), OVERRIDE_ORIGIN
     removals: tuple[str, ...] = ()
     if not humble:
         # ROS_LOCALHOST_ONLY=1 would override the chosen range: it goes.

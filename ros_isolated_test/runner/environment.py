@@ -111,8 +111,13 @@ def decide(
         return Policy(isolate=True, env=env, notes=tuple(notes), discovery=confined)
     domain = env.get(DOMAIN_VAR)
     where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
-    warning = (
+    warnings = [
         f"WARNING: {DISABLE_VAR} is set: running WITHOUT isolation on {where}; "
         "this test hears and disturbs every other ROS process on that domain"
-    )
-    return Policy(isolate=False, env=env, notes=(*notes, warning))
+    ]
+    if discovery_range is not None:
+        warnings.append(
+            f"WARNING: the discovery range {discovery_range} is not applied: {DISABLE_VAR} "
+            "leaves the test's environment as it is"
+        )
+    return Policy(isolate=False, env=env, notes=(*notes, *warnings))
