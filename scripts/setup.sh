@@ -8,7 +8,14 @@ set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$root"
 
-python=${ROS_ISOLATED_TEST_PYTHON:-python3.11}
+# The distribution's Python 3.11 when it has one: every user can run it, so the tests
+# can start runners as other users (the shared lock directory's multi-user cases); a
+# Python under root's home cannot be run by them.
+default_python=python3.11
+if /usr/bin/python3.11 -c 'import venv, ensurepip' >/dev/null 2>&1; then
+  default_python=/usr/bin/python3.11
+fi
+python=${ROS_ISOLATED_TEST_PYTHON:-$default_python}
 if ! command -v "$python" >/dev/null 2>&1; then
   echo "setup: $python not found; the ROS 2 Jazzy wheels need CPython 3.11 (set ROS_ISOLATED_TEST_PYTHON to another interpreter)" >&2
   exit 1
