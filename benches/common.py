@@ -7,6 +7,7 @@ runner itself. Everything a run leaves behind goes into one temporary directory.
 
 from __future__ import annotations
 
+import math
 import os
 import statistics
 import subprocess
@@ -123,9 +124,11 @@ def run_timed(
 ) -> Timed:
     """Run to completion; wall time from just before the fork to the reaping wait4.
 
-    wait4's rusage gives ru_maxrss for the process itself, or for a descendant it
-    waited for if that one grew bigger: here that is the runner, whose test command
-    (a shell, ``yes``, ``head``, ``true``) stays at a few MB.
+    With ``stdout=subprocess.PIPE`` the output is read and thrown away as it comes, in
+    1 MiB reads, as ctest reads a test's output from a pipe. wait4's rusage gives
+    ru_maxrss for the process itself, or for a descendant it waited for if that one grew
+    bigger: here that is the runner, whose test command (a shell, ``yes``, ``head``,
+    ``true``) stays at a few MB.
     """
     start = time.perf_counter()
     proc = subprocess.Popen(
@@ -136,6 +139,11 @@ def run_timed(
         stderr=subprocess.STDOUT,
         cwd=cwd,
     )
+    if proc.stdout is not None:
+        fd = proc.stdout.fileno()
+        while os.read(fd, 1 << 20):
+            pass
+        proc.stdout.close()
     _, status, usage = os.wait4(proc.pid, 0)
     seconds = time.perf_counter() - start
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -171,23 +179,24 @@ def percentile(values: Sequence[float], pct: float) -> float:
 
 def ms(seconds: float) -> str:
     """Seconds shown as milliseconds."""
-    if seconds != seconds:  # NaN
+    if math.isnan(seconds):
         return "-"
     return f"{seconds * 1000:.0f} ms" if seconds >= 0.01 else f"{seconds * 1000:.1f} ms"
 
 
 def secs(seconds: float) -> str:
     """Seconds shown as seconds."""
-    if seconds != seconds:
+    if math.isnan(seconds):
         return "-"
     return f"{seconds:.2f} s"
 
 
 def ratio(ours: float, upstream: float) -> str:
     """ours / upstream, the number the table is about."""
-    if ours != ours or upstream != upstream or upstream <= 0:
+    if math.isnan(ours) or math.isnan(upstream) or upstream <= 0:
         return "-"
-    return f"{ours / upstream:.2f}"
+    value = ours / upstream
+    return f"{value:.2f}" if value < 10 else f"{value:.0f}"
 
 
 def startup_seconds(env: Mapping[str, str], reps: int, reexec: bool) -> float:

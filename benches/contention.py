@@ -187,7 +187,7 @@ def run(ctx: Context) -> Section:
         f"Ours: `DomainCoordinator(lock_dir=<private>, pool=range(1, 102)).reserve(...)` "
         f"(the default pool has 101 IDs). Upstream: `domain_coordinator.domain_id()`, IDs "
         f"1-100 on TCP ports 32769-32868. Wait = from the call to holding the ID; "
-        f"\"all hold\" = from the release of the start barrier to the last ID held. With "
-        f"{PROCESSES} processes on {os.cpu_count()} cores, most of a wait is waiting for a CPU."
+        f'"all hold" = from the release of the start barrier to the last ID held, '
+        f"{PROCESSES} processes on {os.cpu_count()} CPUs."
     )
     return section

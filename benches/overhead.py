@@ -35,13 +35,14 @@ OWN_WORK_TARGET = 0.020
 _PROBE = r"""
 import runpy, sys, time
 kind, script, timing = sys.argv[1:4]
+# Before the imports: ament_cmake_test.main's default argv is bound when it is imported.
+sys.argv = [script, *sys.argv[4:]]
 t0 = time.perf_counter()
 if kind == "ours":
     import ros_isolated_test.runner.ament_args
 else:
     import ament_cmake_test, domain_coordinator
 t1 = time.perf_counter()
-sys.argv = [script, *sys.argv[4:]]
 code = 0
 try:
     runpy.run_path(script, run_name="__main__")
@@ -80,13 +81,24 @@ def _importtime(lines: list[str]) -> list[tuple[int, str, int, int]]:
     return parsed
 
 
-def import_profile(ctx: Context, reps: int) -> tuple[list[tuple[ImportEdge, float]], float, float]:
+@dataclass(frozen=True)
+class ImportProfile:
+    """Our runner's imports: outside modules by first importer, our own modules, the total."""
+
+    outside: list[tuple[ImportEdge, float]]
+    own: list[tuple[str, float]]
+    own_total: float
+    total: float
+
+
+def import_profile(ctx: Context, reps: int) -> ImportProfile:
     """Where our runner's import time goes, from ``-X importtime`` of a real no-op run.
 
-    Returns the imports that ros_isolated_test (or the runner script) pulls in from
-    outside itself, heaviest first with their cumulative time, then the self time of
-    our own modules, then the total. Modules the interpreter already loads at start-up
-    (``python -c pass``) are left out: every Python process pays for them.
+    Outside modules are those ros_isolated_test (or the runner script) pulls in from
+    elsewhere, with their cumulative time, under the module that imported them first;
+    our own modules are shown with their self time. Medians over ``reps`` runs. Modules
+    the interpreter already loads at start-up (``python -c pass``) are left out: every
+    Python process pays for them.
     """
     startup = subprocess.run(
         [ctx.python, "-X", "importtime", "-c", "pass"],
@@ -97,7 +109,8 @@ def import_profile(ctx: Context, reps: int) -> tuple[list[tuple[ImportEdge, floa
     )
     preloaded = {name for _, name, _, _ in _importtime(startup.stderr.splitlines())}
     edges: dict[ImportEdge, list[float]] = defaultdict(list)
-    own: list[float] = []
+    own: dict[str, list[float]] = defaultdict(list)
+    own_totals: list[float] = []
     totals: list[float] = []
     result = ctx.scratch("overhead") / "importtime.xml"
     for _ in range(reps):
@@ -123,17 +136,23 @@ def import_profile(ctx: Context, reps: int) -> tuple[list[tuple[ImportEdge, floa
                 total_us += cumulative
             if name.startswith("ros_isolated_test"):
                 own_us += self_us
+                own[name].append(self_us / 1e6)
             elif importer.startswith("ros_isolated_test") or level == 0:
                 edges[ImportEdge(name, importer)].append(cumulative / 1e6)
-        own.append(own_us / 1e6)
+        own_totals.append(own_us / 1e6)
         totals.append(total_us / 1e6)
-    heaviest = sorted(
-        ((edge, median(times)) for edge, times in edges.items()), key=lambda item: -item[1]
+    return ImportProfile(
+        outside=sorted(
+            ((edge, median(times)) for edge, times in edges.items()), key=lambda item: -item[1]
+        ),
+        own=sorted(((name, median(times)) for name, times in own.items()), key=lambda i: -i[1]),
+        own_total=median(own_totals),
+        total=median(totals),
     )
-    return heaviest, median(own), median(totals)
 
 
-def _probe(ctx: Context, runner: str, timing: Path) -> tuple[float, float] | None:
+def _probe(ctx: Context, runner: str, timing: Path) -> tuple[float, float, float] | None:
+    """One no-op run under the in-process timer: (imports, run, whole process wall)."""
     result = ctx.scratch("overhead") / f"probe-{runner}.xml"
     command = ctx.runner_command(runner, result, NOOP)
     probe = [ctx.python, "-u", "-c", _PROBE, runner, command[2], str(timing), *command[3:]]
@@ -141,7 +160,7 @@ def _probe(ctx: Context, runner: str, timing: Path) -> tuple[float, float] | Non
     if outcome.returncode != 0:
         return None
     imports, rest = (float(part) for part in timing.read_text().split())
-    return imports, rest
+    return imports, rest, outcome.seconds
 
 
 def run(ctx: Context) -> Section:
@@ -164,14 +183,16 @@ def run(ctx: Context) -> Section:
             failures[runner] += 1
         if runner == UPSTREAM:
             startups.append(run_timed(startup_command, env).seconds)
-    parts: dict[str, tuple[list[float], list[float]]] = {r: ([], []) for r in RUNNERS}
+    parts: dict[str, tuple[list[float], list[float], list[float]]] = {
+        runner: ([], [], []) for runner in RUNNERS
+    }
     for _, runner in interleaved(probe_reps):
         measured = _probe(ctx, runner, scratch / f"timing-{runner}.txt")
         if measured is not None:
-            parts[runner][0].append(measured[0])
-            parts[runner][1].append(measured[1])
+            for index, value in enumerate(measured):
+                parts[runner][index].append(value)
     progress("overhead: import profile of ours (-X importtime)")
-    heaviest, own_modules, import_total = import_profile(ctx, 3)
+    profile = import_profile(ctx, 3)
 
     startup = median(startups)
     wall = {runner: median(walls[runner]) for runner in RUNNERS}
@@ -184,7 +205,9 @@ def run(ctx: Context) -> Section:
     section.rows.append(
         ("wall time per test (median)", ms(wall[OURS]), ms(wall[UPSTREAM]), ratio(*wall.values()))
     )
-    section.rows.append(("interpreter start-up (`python -u -c pass`)", ms(startup), ms(startup), ""))
+    section.rows.append(
+        ("interpreter start-up (`python -u -c pass`)", ms(startup), ms(startup), "")
+    )
     section.rows.append(
         ("the runner's own work (wall - start-up)", ms(own[OURS]), ms(own[UPSTREAM]),
          ratio(own[OURS], own[UPSTREAM]))
@@ -199,6 +222,21 @@ def run(ctx: Context) -> Section:
          ms(median(parts[OURS][1])), ms(median(parts[UPSTREAM][1])),
          ratio(median(parts[OURS][1]), median(parts[UPSTREAM][1])))
     )  # fmt: skip
+    # Per probe run: its wall time less start-up, imports and run is the interpreter's
+    # exit (more modules, more to tear down) and the loading of the script.
+    rest = {
+        runner: median(
+            [
+                wall_ - startup - imports - run_
+                for imports, run_, wall_ in zip(*parts[runner], strict=True)
+            ]
+        )
+        for runner in RUNNERS
+    }
+    section.rows.append(
+        ("... and the rest: interpreter exit, loading the script",
+         ms(rest[OURS]), ms(rest[UPSTREAM]), ratio(rest[OURS], rest[UPSTREAM]))
+    )  # fmt: skip
     verdict = "met" if wall[OURS] <= wall[UPSTREAM] else "NOT met"
     own_verdict = "met" if own[OURS] < OWN_WORK_TARGET else "NOT met"
     section.notes.append(
@@ -208,16 +246,20 @@ def run(ctx: Context) -> Section:
     for runner, count in failures.items():
         if count:
             section.notes.append(f"**{count} of {reps} {runner} runs failed.**")
-    if heaviest:
-        listed = ", ".join(
-            f"{edge.module} {seconds * 1000:.0f} ms (imported by {edge.importer})"
-            for edge, seconds in heaviest[:8]
+    if profile.outside:
+        outside = ", ".join(
+            f"{edge.module} {seconds * 1000:.0f} ms (first imported by {edge.importer})"
+            for edge, seconds in profile.outside[:8]
+        )
+        own_modules = ", ".join(
+            f"{name.removeprefix('ros_isolated_test.')} {seconds * 1000:.1f} ms"
+            for name, seconds in profile.own[:5]
         )
         section.notes.append(
-            f"Where our imports go (`-X importtime`, median of 3, which inflates every "
-            f"figure; modules `python -c pass` already loads left out): "
-            f"{import_total * 1000:.0f} ms in all, {own_modules * 1000:.0f} ms in "
-            f"ros_isolated_test's own modules; heaviest imports from outside it: {listed}."
+            f"Where our imports go (`-X importtime` of a no-op run, median of 3; the profiler "
+            f"inflates every figure; modules `python -c pass` already loads left out): "
+            f"{profile.total * 1000:.0f} ms in all. Heaviest imports from outside "
+            f"ros_isolated_test, with all they pull in: {outside}. ros_isolated_test's own "
+            f"modules, {profile.own_total * 1000:.0f} ms of self time, most in: {own_modules}."
         )
     return section
-

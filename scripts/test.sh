@@ -5,7 +5,7 @@ set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$root"
 scripts/setup.sh
-.venv/bin/ruff check ros_isolated_test tests examples scripts
+.venv/bin/ruff check ros_isolated_test tests examples scripts benches
 .venv/bin/mypy
 scripts/py310_smoke.sh
 exec .venv/bin/python -m pytest "$@"

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import ctypes.util
 import os
 
 _PR_SET_CHILD_SUBREAPER = 36
@@ -21,7 +20,8 @@ def become_subreaper() -> bool:
     if os.getpid() == 1:
         return True  # PID 1 adopts every orphan of its namespace anyway.
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        # The running process's own symbols: no ldconfig lookup (find_library runs one).
+        libc = ctypes.CDLL(None, use_errno=True)
         return bool(libc.prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0)
     except (OSError, AttributeError):
         return False

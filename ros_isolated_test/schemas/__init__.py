@@ -8,7 +8,7 @@ and the GitHub reporters.
 from __future__ import annotations
 
 from functools import cache
-from importlib import resources
+from pathlib import Path
 
 from lxml import etree
 
@@ -18,5 +18,6 @@ JUNIT_XSD = "junit.xsd"
 @cache
 def junit_schema() -> etree.XMLSchema:
     """The canonical schema, parsed once per process."""
-    data = (resources.files(__name__) / JUNIT_XSD).read_bytes()
+    # Beside this module in every install (package data): no importlib.resources needed.
+    data = (Path(__file__).parent / JUNIT_XSD).read_bytes()
     return etree.XMLSchema(etree.fromstring(data))
