@@ -255,7 +255,8 @@ class DomainCoordinator:
         """Reserve an ID, waiting first come, first served while the pool is full."""
         ensure_lock_dir(self.lock_dir)
         queue = Queue(self.lock_dir)
-        if not queue.waiting():
+        # Queue behind earlier waiters, unless not waiting at all: then any free ID will do.
+        if wait_timeout <= 0 or not queue.waiting():
             reservation = self.try_reserve(command)
             if reservation is not None:
                 return reservation
