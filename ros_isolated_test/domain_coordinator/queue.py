@@ -91,20 +91,31 @@ class Queue:
         Yields None when the queue folder is unusable (something planted there): the
         runner then still waits, only without the first-come-first-served order.
         """
+        fd: int | None = None
+        staging: Path | None = None
         try:
             ensure_lock_dir(self.path)
             name = f"{time.time_ns():020d}-{os.getpid()}.ticket"
             path = self.path / name
+            # Locked under a name nobody looks at, then renamed into the queue: an
+            # unlocked ticket would look dead and could be removed by another runner.
+            staging = self.path / f".{name}.new"
             fd = os.open(
-                path, os.O_RDONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644
+                staging, os.O_RDONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644
             )
-        except (OSError, LockDirError):
-            yield None
-            return
-        try:
             with contextlib.suppress(OSError):
                 os.fchmod(fd, 0o644)  # others must open it to see that it is held
             lock_descriptor(fd, blocking=True)
+            os.rename(staging, path)
+        except (OSError, LockDirError):
+            if fd is not None:
+                os.close(fd)
+            if staging is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(staging)
+            yield None
+            return
+        try:
             yield Ticket(self, name, fd)
         finally:
             with contextlib.suppress(OSError):

@@ -163,7 +163,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         request = parse(argv)
     except UsageError as error:
-        return session.report_usage_error(str(error), error.result_file, PROG)
+        message = f"{PROG}: {error}; see {PROG} --help"
+        return session.report_usage_error(message, error.result_file)
     return session.run(request)
 
 

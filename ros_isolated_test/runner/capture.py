@@ -28,6 +28,8 @@ class OutputCapture:
         self._tail_limit = tail_bytes
         self._tail = bytearray()
         self.total_bytes = 0
+        #: Why the output file stopped being written, if it did.
+        self.file_error: str | None = None
 
     def feed(self, chunk: bytes) -> None:
         """Pass one chunk on as it arrived (no line buffering: prompts and dots show at once)."""
@@ -54,8 +56,15 @@ class OutputCapture:
             # A closed console (a reader that went away) must not kill the test's run.
             pass
         if self._file is not None:
-            self._file.write(data)
-            self._file.flush()
+            try:
+                self._file.write(data)
+                self._file.flush()
+            except OSError as error:
+                # A full disk or a closed pipe ends the copy, never the run: the console
+                # and the result file still get everything.
+                self._file = None
+                self.file_error = f"writing the output file failed: {error.strerror or error}"
+                self.note(f"{self.file_error}; output continues on the console only")
 
     @property
     def truncated(self) -> bool:

@@ -70,7 +70,37 @@ def _finite(value: float | None, name: str) -> float | None:
     return value
 
 
+class _RunCommand(click.Command):
+    """`run`, whose bad arguments still leave the --junit-xml file that was asked for."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        raw = list(args)  # click's parser consumes the list it is given
+        try:
+            return super().parse_args(ctx, args)
+        except click.UsageError as error:
+            junit = _junit_xml_of(raw)
+            if junit is None:
+                raise
+            message = (
+                f"ros-isolated-test run: {error.format_message()}; see ros-isolated-test run --help"
+            )
+            ctx.exit(session.report_usage_error(message, junit))
+
+
+def _junit_xml_of(args: list[str]) -> Path | None:
+    """The --junit-xml path among raw arguments (before `--`), if one was given."""
+    for index, item in enumerate(args):
+        if item == "--":
+            break
+        if item.startswith("--junit-xml="):
+            return Path(item.split("=", 1)[1])
+        if item == "--junit-xml" and index + 1 < len(args):
+            return Path(args[index + 1])
+    return None
+
+
 @cli.command(
+    cls=_RunCommand,
     context_settings={"ignore_unknown_options": True, "allow_interspersed_args": False},
     epilog=f"{EXIT_CODES_HELP}\n\b\nExample:\n  ros-isolated-test run --junit-xml out.xml -- "
     "python3 -m pytest test/test_talker.py",

@@ -80,7 +80,7 @@ def _count(attrs: dict[str, str], *names: str) -> int:
     for name in names:
         try:
             total += max(int(float(attrs.get(name, "0") or "0")), 0)
-        except ValueError:
+        except (ValueError, OverflowError):
             continue
     return total
 

@@ -12,6 +12,7 @@ import errno
 import os
 import shlex
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -34,6 +35,8 @@ class ResultFile:
         self.placeholder: bytes | None = None
         #: What was wrong with the test's own file, for the console.
         self.problems: list[str] = []
+        #: Why the result file could not be written, if it could not.
+        self.write_error: str | None = None
 
     @property
     def original(self) -> Path | None:
@@ -82,7 +85,13 @@ class ResultFile:
             system_out=output,
         )
         rendered = results.render(suite)
-        results.write_atomically(self.path, rendered.data)
+        try:
+            results.write_atomically(self.path, rendered.data)
+        except OSError as error:
+            self.write_error = f"cannot write result file {self.path}: {error.strerror or error}"
+            with contextlib.suppress(OSError, ValueError):
+                print(f"ros-isolated-test: error: {self.write_error}", file=sys.stderr, flush=True)
+            return None
         return rendered
 
     def write_placeholder(self) -> None:

@@ -54,7 +54,9 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
         return _not_run(result, console, message, Outcome.ERROR, exit_codes.USAGE)
     with output as handle:
         capture = OutputCapture(console, handle)
-        return _run(request, result, capture, console)
+        code = _run(request, result, capture, console)
+    # A result that could not be written is a failed run, never a silent pass.
+    return exit_codes.FAILED if code == 0 and result.write_error else code
 
 
 def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, console: BinaryIO) -> int:
@@ -71,8 +73,9 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
     except DiscoveryError as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
     result.write_placeholder()
+    guard = _Guard()
     try:
-        with _interruptible(), _domain(policy, request, capture) as domain_id:
+        with _interruptible(guard), _domain(policy, request, capture) as domain_id:
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
                 result.properties["ros_domain_id"] = str(domain_id)
@@ -91,6 +94,7 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
             for note in policy.notes:
                 capture.note(note)
             capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
+            guard.test_started = True
             outcome = supervisor.run(
                 request.command, env, capture, request.timeout, request.kill_grace
             )
@@ -105,6 +109,9 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
         return _not_run(
             result, console, message, Outcome.ERROR, exit_codes.for_signal(interruption.signum)
         )
+    if guard.late is not None:
+        # The test had ended: the run's outcome stands, the signal is only noted.
+        result.properties["signal_after_test"] = exit_codes.signal_name(guard.late)
     for leftover in outcome.leftovers:
         capture.note(f"stopped process {leftover}, left running by the test")
     if outcome.leftovers:
@@ -120,17 +127,29 @@ class Interrupted(Exception):
         self.signum = signum
 
 
+class _Guard:
+    """Whether the test has started: a signal after that must not say it never ran."""
+
+    def __init__(self) -> None:
+        self.test_started = False
+        self.late: int | None = None
+
+
 @contextlib.contextmanager
-def _interruptible() -> Iterator[None]:
+def _interruptible(guard: _Guard) -> Iterator[None]:
     """Until the supervisor takes over, SIGINT/SIGTERM/SIGHUP end the run cleanly.
 
     Needed for a runner queued for an ID (and for PID 1, which has no default action).
+    Once the test has run, a signal (while the ID is released) is only remembered.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def stop(signum: int, _frame: FrameType | None) -> None:
+        if guard.test_started:
+            guard.late = signum
+            return
         raise Interrupted(signum)
 
     previous = {signum: signal.signal(signum, stop) for signum in supervisor.FORWARDED_SIGNALS}
@@ -253,22 +272,15 @@ def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[
     return outcome.returncode, f"exited with code {outcome.returncode}"
 
 
-def report_usage_error(message: str, result_file: Path | None, prog: str) -> int:
-    """Arguments that cannot be understood: say so, and still leave a result file."""
-    request = RunRequest(command=(), mode=Mode.AMENT, result_file=result_file)
-    result = ResultFile(request)
+def report_usage_error(message: str, result_file: Path | None) -> int:
+    """Arguments that cannot be understood: say so in one line, still leave a result file."""
+    result = ResultFile(RunRequest(command=(), mode=Mode.AMENT, result_file=result_file))
     try:
         result.prepare()
-        return _not_run(
-            result,
-            sys.stdout.buffer,
-            f"{prog}: {message}; see {prog} --help",
-            Outcome.ERROR,
-            exit_codes.USAGE,
-        )
     except OSError:
-        _error(sys.stdout.buffer, f"{prog}: {message}; see {prog} --help")
+        _error(sys.stdout.buffer, message)
         return exit_codes.USAGE
+    return _not_run(result, sys.stdout.buffer, message, Outcome.ERROR, exit_codes.USAGE)
 
 
 def _not_run(result: ResultFile, console: BinaryIO, message: str, kind: Outcome, code: int) -> int:
@@ -293,4 +305,5 @@ def _open_output(path: Path | None) -> contextlib.AbstractContextManager[BinaryI
     if path is None:
         return contextlib.nullcontext()
     path.parent.mkdir(parents=True, exist_ok=True)
-    return open(path, "wb")
+    # Unbuffered: a failing write is seen (and survived) at once, never at close.
+    return open(path, "wb", buffering=0)

@@ -27,6 +27,8 @@ from ros_isolated_test.runner.capture import OutputCapture
 CHUNK_BYTES = 64 * 1024
 #: How long to keep draining output after the test exited, while bytes keep coming.
 DRAIN_IDLE_SECONDS = 0.2
+#: At most this long after the test exited, however much its leftovers keep writing.
+DRAIN_LIMIT_SECONDS = 1.0
 POLL_SECONDS = 0.2
 #: Signals that end a run: passed on to the test, then the same cleanup as a timeout.
 FORWARDED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -112,7 +114,14 @@ def run(
         if signals.received is not None:
             # It came while the test was being started, before it could be passed on.
             process_tree.signal_tree(process.pid, signals.received)
-        timed_out = _pump(process, capture, start, timeout, kill_grace, signals)
+        try:
+            timed_out = _pump(process, capture, start, timeout, kill_grace, signals)
+        except BaseException:
+            # Whatever went wrong in the runner, the test must not outlive it unseen.
+            process_tree.signal_tree(process.pid, signal.SIGKILL)
+            process.wait()
+            _end_leftovers(0.0)
+            raise
         returncode = process.wait()
         leftovers = _end_leftovers(kill_grace)
         _drain(process, capture)
@@ -147,6 +156,7 @@ def _pump(
     kill_at: float | None = None
     timed_out = False
     pipe_open = True
+    drain_until: float | None = None
     with selectors.DefaultSelector() as selector:
         selector.register(fd, selectors.EVENT_READ)
         while True:
@@ -161,7 +171,11 @@ def _pump(
                 _signal(process, signal.SIGKILL)
             reaper.reap_orphans(keep=process.pid)
             exited = process.poll() is not None
-            if exited and not pipe_open:
+            if exited and drain_until is None:
+                drain_until = now + DRAIN_LIMIT_SECONDS
+            if exited and (not pipe_open or now >= (drain_until or now)):
+                # A leftover that keeps printing must not hold the runner: it is stopped
+                # next, and what it wrote by then is drained.
                 break
             wait = DRAIN_IDLE_SECONDS if exited else POLL_SECONDS
             for limit in (None if timed_out else deadline, kill_at):

@@ -28,8 +28,12 @@ def _interpreter_of_cli() -> "str | None":
         return None
     if not first.startswith("#!"):
         return None
-    interpreter = first[2:].strip().split(" ")[0]
-    return interpreter if os.access(interpreter, os.X_OK) else None
+    words = first[2:].split()
+    if words and os.path.basename(words[0]) == "env" and len(words) > 1:
+        # "#!/usr/bin/env python3": the interpreter is the next word, found on PATH.
+        words = [shutil.which(words[1]) or words[1]]
+    interpreter = words[0] if words else ""
+    return interpreter if interpreter and os.access(interpreter, os.X_OK) else None
 
 
 def _import_main() -> "Callable[[], int]":
