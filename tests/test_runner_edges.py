@@ -1,0 +1,70 @@
+"""Edges found in review: each one once ended a run badly (a traceback, a hang, a lost file)."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+
+from conftest import CLI, run_cli
+from test_ament_contract import load_result
+
+from ros_isolated_test.runner.result_file import normalise_file
+
+
+def test_a_failing_output_file_never_ends_the_run(env: dict[str, str], tmp_path: Path) -> None:
+    result = tmp_path / "r.xml"
+    proc = run_cli(
+        ["run", "--junit-xml", str(result), "--output-file", "/dev/full", "--", "echo", "hi"],
+        env,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "writing the output file failed" in proc.stdout
+    assert "hi" in proc.stdout
+    assert load_result(result).only.outcome == "passed"
+
+
+def test_a_leftover_that_keeps_printing_cannot_hold_the_runner(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """Without a limit on draining, the runner waited for as long as the spammer lived."""
+    spam = "(while :; do echo spam; sleep 0.05; done) & exit 0"
+    begin = time.monotonic()
+    proc = subprocess.run(
+        [CLI, "run", "--", "sh", "-c", spam],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "left running by the test" in proc.stdout
+    assert time.monotonic() - begin < 30
+
+
+def test_usage_errors_of_run_still_leave_the_junit_file(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    result = tmp_path / "out" / "r.xml"
+    env["ROS_ISOLATED_TEST_WAIT_TIMEOUT"] = "soon"
+    proc = run_cli(["run", "--junit-xml", str(result), "--", "true"], env, cwd=tmp_path)
+    assert proc.returncode == 2
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stderr
+    case = load_result(result).only
+    assert case.outcome == "error"
+    assert "--wait-timeout" in case.message
+
+
+def test_counts_too_large_for_an_integer_are_read_not_fatal(tmp_path: Path) -> None:
+    source = tmp_path / "t.xml"
+    source.write_text(
+        '<testsuite name="s" tests="1" failures="inf" errors="1e400">'
+        '<testcase classname="C" name="a"/></testsuite>'
+    )
+    data, failed = normalise_file(source, "pkg", "t")
+    assert b'name="a"' in data
+    assert not failed
