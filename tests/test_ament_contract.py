@@ -1,6 +1,6 @@
 """The RUNNER script called exactly as ctest calls it, one test per item of the contract.
 
-See /work/shared/reference/ament-runner-contract.md ("What run_test.py does" and
+See ../shared/reference/ament-runner-contract.md ("What run_test.py does" and
 "What run_test_isolated.py adds"). Every test runs real processes against its own lock dir.
 """
 

@@ -23,7 +23,7 @@ from lxml import etree
 
 from ros_isolated_test.runner import results
 
-SAMPLES = Path("/work/shared/reference/xunit-samples")
+SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "reference" / "xunit-samples"
 SAMPLE_NAMES = sorted(path.name.removesuffix(".xml") for path in SAMPLES.glob("*.xml"))
 COLCON = BIN / "colcon"
 XUNIT_VIEWER = REPO / "node_modules" / ".bin" / "xunit-viewer"
