@@ -22,6 +22,8 @@ import pytest
 from conftest import run_runner
 from lxml import etree
 
+from ros_isolated_test.runner import results
+
 NO_RESULT = "did not generate a result file"
 DOMAIN_LINE = re.compile(r"Running with ROS_DOMAIN_ID (\d+)")
 
@@ -58,12 +60,15 @@ _OUTCOMES = ("failure", "error", "skipped")
 
 
 def load_result(path: Path) -> ResultSummary:
-    """Parse ``path`` with lxml and check it: root ``testsuites``, integer counts that match.
+    """Parse ``path`` with lxml and check it: our schema, root ``testsuites``, counts that match.
 
-    Fails the calling test if the file is not the xUnit every CI tool reads.
+    Fails the calling test if the file is not the xUnit every CI tool reads. Every file
+    the runner writes passes through here: the runner's own results are not validated
+    at run time, so this is where they are.
     """
     assert path.is_file(), f"no result file at {path}"
     root = etree.parse(str(path), etree.XMLParser(resolve_entities=False)).getroot()
+    assert results.problems(root) == [], f"{path} does not match schemas/junit.xsd"
     assert root.tag == "testsuites", f"root is <{root.tag}>, not <testsuites>"
     suites: list[str] = []
     cases: list[CaseResult] = []

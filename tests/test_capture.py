@@ -17,7 +17,7 @@ from lxml import etree
 from test_ament_contract import load_result
 
 from ros_isolated_test.runner.capture import PREFIX, OutputCapture
-from ros_isolated_test.runner.results import xml_safe
+from ros_isolated_test.runner.xml_text import xml_safe
 
 # --- end to end ------------------------------------------------------------------------------
 

@@ -3,34 +3,76 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import pwd
 import shlex
-import socket
 import stat
-import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ros_isolated_test.atomic_file import write_atomically
 
-@dataclass(frozen=True)
+#: JSON string escapes: quote, backslash and every control character.
+_JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
+    code: f"\\u{code:04x}" for code in range(0x20)
+}
+
+
 class Holder:
     """A runner holding an ID: enough for a person to find and judge it."""
 
-    domain_id: int
-    pid: int
-    user: str
-    command: str
-    started: float
-    host: str
+    __slots__ = ("command", "domain_id", "host", "pid", "started", "user")
+
+    def __init__(
+        self, domain_id: int, pid: int, user: str, command: str, started: float, host: str
+    ) -> None:
+        self.domain_id = domain_id
+        self.pid = pid
+        self.user = user
+        self.command = command
+        self.started = started
+        self.host = host
 
     @property
     def started_iso(self) -> str:
         """Local start time, to the second."""
         return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(self.started))
+
+    def as_dict(self) -> dict[str, object]:
+        """The record's fields, as ``status --json`` and the record file carry them."""
+        return {
+            "domain_id": self.domain_id,
+            "pid": self.pid,
+            "user": self.user,
+            "command": self.command,
+            "started": self.started,
+            "host": self.host,
+        }
+
+    def to_json(self) -> str:
+        """The record as one JSON object, without importing ``json`` on a test's path."""
+        fields = (
+            f'"domain_id": {int(self.domain_id)}',
+            f'"pid": {int(self.pid)}',
+            f'"user": {json_string(self.user)}',
+            f'"command": {json_string(self.command)}',
+            f'"started": {float(self.started)!r}',
+            f'"host": {json_string(self.host)}',
+        )
+        return "{" + ", ".join(fields) + "}"
+
+
+def json_string(text: str) -> str:
+    r"""``text`` as a JSON string literal; lone surrogates (undecodable bytes) as ``\uXXXX``."""
+    escaped = text.translate(_JSON_ESCAPES)
+    try:
+        escaped.encode("utf-8")
+    except UnicodeEncodeError:
+        escaped = "".join(
+            f"\\u{ord(char):04x}" if 0xD800 <= ord(char) <= 0xDFFF else char for char in escaped
+        )
+    return f'"{escaped}"'
 
 
 def current_user() -> str:
@@ -56,28 +98,21 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
         user=current_user(),
         command=shlex.join(command),
         started=time.time(),
-        host=socket.gethostname(),
+        host=os.uname().nodename,
     )
     path = record_path(lock_dir, domain_id)
     if os.path.lexists(path) and not owned_file(path):
         # Planted by someone else: root could rename over it, but never writes what
         # it does not own. The reservation stands without a record.
         raise PermissionError(f"{path} belongs to someone else")
-    fd, temp_name = tempfile.mkstemp(dir=lock_dir, prefix=".holder-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(asdict(holder), handle)
-        os.chmod(temp_name, 0o644)
-        os.replace(temp_name, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp_name)
-        raise
+    write_atomically(path, holder.to_json().encode("utf-8"))
     return path
 
 
 def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:
     """Every readable record for the ID, newest first; unreadable ones are skipped."""
+    import json
+
     holders: list[Holder] = []
     for path in lock_dir.glob(f"domain-{domain_id}.uid*.holder.json"):
         try:

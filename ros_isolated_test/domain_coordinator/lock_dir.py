@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -29,7 +28,11 @@ def lock_dir_from_env(environ: Mapping[str, str] | None = None) -> Path:
     configured = environ.get(LOCK_DIR_ENV, "").strip()
     if configured:
         return Path(configured)
-    return Path("/tmp" if os.path.isdir("/tmp") else tempfile.gettempdir()) / DEFAULT_DIR_NAME
+    if os.path.isdir("/tmp"):
+        return Path("/tmp", DEFAULT_DIR_NAME)
+    import tempfile
+
+    return Path(tempfile.gettempdir(), DEFAULT_DIR_NAME)
 
 
 def _create_shared(path: Path) -> None:
@@ -38,6 +41,8 @@ def _create_shared(path: Path) -> None:
     A directory created in place is briefly mode 0700 (mkdir's mode is cut by the
     umask), and another user's runner arriving then would find it unwritable.
     """
+    import tempfile
+
     try:
         staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     except OSError as error:

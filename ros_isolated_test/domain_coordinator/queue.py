@@ -14,8 +14,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from filelock import lock_descriptor
-
+from ros_isolated_test.domain_coordinator.flock import try_lock, wait_lock
 from ros_isolated_test.domain_coordinator.holder import owned_file
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError, ensure_lock_dir
 
@@ -78,7 +77,7 @@ class Queue:
             if not stat.S_ISREG(os.fstat(fd).st_mode):
                 return False
             # Taking the lock means nobody holds it: its waiter is gone.
-            return not lock_descriptor(fd, blocking=False)
+            return not try_lock(fd)
         except OSError:
             return False
         finally:
@@ -105,7 +104,7 @@ class Queue:
             )
             with contextlib.suppress(OSError):
                 os.fchmod(fd, 0o644)  # others must open it to see that it is held
-            lock_descriptor(fd, blocking=True)
+            wait_lock(fd)
             os.rename(staging, path)
         except (OSError, LockDirError):
             if fd is not None:

@@ -7,6 +7,9 @@ timeouts, no daemon. The descriptor is close-on-exec: the test does not inherit 
 Every holder also binds the ID's TCP port, and that port is the final arbiter: when a
 lock file was planted by another user (a symlink, a file we may not open) a runner
 falls back to a lock file of its own for that ID and still cannot collide.
+
+The lock is filelock's (see ``flock``): a filelock ``FileLock`` on an ID's lock file
+and our reservation of that ID exclude each other.
 """
 
 from __future__ import annotations
@@ -14,16 +17,13 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import socket
 import stat
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
-from filelock import lock_descriptor
-
 from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
 from ros_isolated_test.domain_coordinator.lock_dir import (
     LockDirError,
     ensure_lock_dir,
@@ -61,17 +61,34 @@ def release_stamp(lock_dir: Path, domain_id: int) -> Path:
     return lock_dir / f"domain-{domain_id}.uid{os.getuid()}.released"
 
 
-@dataclass
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    import _socket
+
+
 class Reservation:
     """A held domain ID. Release it with :meth:`release` (or leave the ``with`` block)."""
 
-    domain_id: int
-    #: None when every lock file for the ID was planted: the port alone guards it then.
-    lock_fd: int | None
-    port: socket.socket
-    record: Path | None
-    lock_dir: Path
-    released: bool = field(default=False, init=False)
+    __slots__ = ("domain_id", "lock_dir", "lock_fd", "port", "record", "released")
+
+    def __init__(
+        self,
+        domain_id: int,
+        lock_fd: int | None,
+        port: _socket.socket,
+        record: Path | None,
+        lock_dir: Path,
+    ) -> None:
+        self.domain_id = domain_id
+        #: None when every lock file for the ID was planted: the port alone guards it then.
+        self.lock_fd = lock_fd
+        self.port = port
+        self.record = record
+        self.lock_dir = lock_dir
+        self.released = False
+
+    def __repr__(self) -> str:
+        return f"Reservation(domain_id={self.domain_id}, released={self.released})"
 
     def release(self) -> None:
         """Give the ID back: record first, so ``status`` never names a holder that left."""
@@ -130,7 +147,7 @@ def _open_lock_file(path: Path) -> int:
 
 def _flock(fd: int) -> int | None:
     try:
-        if lock_descriptor(fd, blocking=False):
+        if _try_flock(fd):
             return fd
     except OSError:
         pass
@@ -200,6 +217,21 @@ def _released_at(lock_dir: Path) -> dict[int, float]:
     return released
 
 
+def _spread(remaining: list[int], released: dict[int, float]) -> list[int]:
+    """``remaining`` with its equally old head rotated by our PID.
+
+    Runners started together find the same ID taken and would all try the same next
+    one; among IDs no older than each other (a fresh machine: all of them) each goes
+    on from a place of its own. Least recently used still comes first.
+    """
+    age = released.get(remaining[0], 0.0)
+    ties = 1
+    while ties < len(remaining) and released.get(remaining[ties], 0.0) == age:
+        ties += 1
+    turn = os.getpid() % ties
+    return remaining[turn:ties] + remaining[:turn] + remaining[ties:]
+
+
 class DomainCoordinator:
     """Hands out domain IDs from a pool, machine-wide, through a shared lock directory."""
 
@@ -207,43 +239,51 @@ class DomainCoordinator:
         self.lock_dir = lock_dir if lock_dir is not None else lock_dir_from_env()
         self.pool = tuple(pool) if pool is not None else pool_from_env()
 
-    def candidates(self) -> list[int]:
-        """The pool, least recently released first, without IDs live processes use.
+    def candidates(self, released: dict[int, float] | None = None) -> list[int]:
+        """The pool, least recently released first.
 
         Least recently used: discovery data a finished test left behind has the most
         time to expire before its domain is used again.
         """
-        busy = squatters.scan(set(self.pool))
-        released = _released_at(self.lock_dir)
-        free = [domain_id for domain_id in self.pool if domain_id not in busy]
-        return sorted(free, key=lambda domain_id: released.get(domain_id, 0.0))
+        released = _released_at(self.lock_dir) if released is None else released
+        return sorted(self.pool, key=lambda domain_id: released.get(domain_id, 0.0))
 
     def try_reserve(self, command: Sequence[str]) -> Reservation | None:
         """A free ID of the pool, held; None when all are taken.
 
         An ID counts as free only when its lock and its TCP port can both be taken (so
         upstream's ``domain_coordinator`` on this machine is respected) and no live
-        process carries it in its environment.
+        process carries it in its environment. That last check, a scan of every
+        process, runs once, while the first ID is already held: no process can take
+        that ID up after the scan, and runners that find every ID locked never pay it.
         """
         ensure_lock_dir(self.lock_dir)
-        for domain_id in self.candidates():
+        squatted: set[int] | None = None
+        released = _released_at(self.lock_dir)
+        remaining = self.candidates(released)
+        spread = False
+        while remaining:
+            domain_id = remaining.pop(0)
             found = try_lock(self.lock_dir, domain_id)
             if found is None:
+                if not spread and remaining:
+                    spread = True
+                    remaining = _spread(remaining, released)
                 continue
             lock_fd = None if found == PORT_ONLY else found
             port = port_guard.claim_port(domain_id)
-            if port is None or squatters.scan({domain_id}):
-                # Taken through the port, or a process took the ID up since the scan.
-                if port is not None:
-                    port.close()
-                if lock_fd is not None:
-                    os.close(lock_fd)
-                continue
-            try:
-                record: Path | None = holder.write_record(self.lock_dir, domain_id, command)
-            except OSError:
-                record = None  # status shows "no holder record"; the reservation stands
-            return Reservation(domain_id, lock_fd, port, record, self.lock_dir)
+            if port is not None:
+                if squatted is None:
+                    squatted = set(squatters.scan(set(self.pool)))
+                if domain_id not in squatted:
+                    try:
+                        record: Path | None = holder.write_record(self.lock_dir, domain_id, command)
+                    except OSError:
+                        record = None  # status shows "no holder record"; the ID stays held
+                    return Reservation(domain_id, lock_fd, port, record, self.lock_dir)
+                port.close()
+            if lock_fd is not None:
+                os.close(lock_fd)
         return None
 
     def acquire(

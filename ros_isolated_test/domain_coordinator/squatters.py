@@ -13,26 +13,31 @@ import os
 import pwd
 import re
 import time
-from dataclasses import dataclass
 
 _VARIABLE = b"ROS_DOMAIN_ID="
-_LEADING_NUMBER = re.compile(r"\s*(0[xX][0-9a-fA-F]+|[0-9]+)")
+#: Compiled on first use (re's cache): most scans find no variable to read.
+_LEADING_NUMBER = r"\s*(0[xX][0-9a-fA-F]+|[0-9]+)"
 
 
-@dataclass(frozen=True)
 class Squatter:
     """A live process with ROS_DOMAIN_ID in its environment."""
 
-    pid: int
-    domain_id: int
-    user: str
-    command: str
-    started: float
+    __slots__ = ("command", "domain_id", "pid", "started", "user")
+
+    def __init__(self, pid: int, domain_id: int, user: str, command: str, started: float) -> None:
+        self.pid = pid
+        self.domain_id = domain_id
+        self.user = user
+        self.command = command
+        self.started = started
+
+    def __repr__(self) -> str:
+        return f"Squatter(pid={self.pid}, domain_id={self.domain_id}, command={self.command!r})"
 
 
 def domain_value(text: str) -> int | None:
     """The domain ROS reads from a ROS_DOMAIN_ID value (``0x10`` is 16, ``5abc`` is 5)."""
-    match = _LEADING_NUMBER.match(text)
+    match = re.match(_LEADING_NUMBER, text)
     if match is None:
         return None
     number = match.group(1)
@@ -77,22 +82,15 @@ def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
     unless we are root, and are skipped.
     """
     found: dict[int, list[Squatter]] = {}
-    me = os.getpid()
+    me = str(os.getpid())
     try:
-        entries = [entry.name for entry in os.scandir("/proc") if entry.name.isdigit()]
+        entries = [name for name in os.listdir("/proc") if name.isdigit() and name != me]
     except OSError:
         return found
     boot: float | None = None
     ticks = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
     for name in entries:
-        pid = int(name)
-        if pid == me:
-            continue
-        try:
-            with open(f"/proc/{name}/environ", "rb") as handle:
-                environ = handle.read()
-        except OSError:
-            continue
+        environ = _environ(name)
         start = environ.find(_VARIABLE)
         while start > 0 and environ[start - 1] != 0:
             start = environ.find(_VARIABLE, start + 1)
@@ -107,6 +105,27 @@ def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
             boot = _boot_time()
         found.setdefault(domain, []).append(_describe(name, domain, boot, ticks))
     return found
+
+
+def _environ(pid: str) -> bytes:
+    """A process's environment block; empty when it is gone or not ours to read.
+
+    Bare descriptors, no file objects: this runs for every process on the machine,
+    once per reservation.
+    """
+    try:
+        fd = os.open(f"/proc/{pid}/environ", os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return b""
+    try:
+        chunks: list[bytes] = []
+        while chunk := os.read(fd, 65536):
+            chunks.append(chunk)
+    except OSError:
+        return b""
+    finally:
+        os.close(fd)
+    return b"".join(chunks)
 
 
 def _describe(pid: str, domain: int, boot: float, ticks: int) -> Squatter:

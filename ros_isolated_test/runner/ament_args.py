@@ -6,12 +6,10 @@ everything after ``--command`` is the test's command line, options included.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
 
 from ros_isolated_test.runner import discovery, exit_codes, session
 from ros_isolated_test.runner.request import (
@@ -22,6 +20,34 @@ from ros_isolated_test.runner.request import (
 )
 
 PROG = "run_test_isolated.py"
+DESCRIPTION = (
+    "ctest RUNNER for ament_add_test / add_launch_test: reserves a free ROS_DOMAIN_ID on "
+    "this machine, runs the test with it and makes sure a result file is left. Accepts "
+    "the arguments of ament_cmake_test's run_test.py."
+)
+EPILOG = "Set DISABLE_ROS_ISOLATION=1 to run without a reserved domain ID."
+
+#: run_test.py's options: (name, metavar or None for a flag, repeats, help). No argparse:
+#: it is imported by every test's runner, and this fixed set needs none of it.
+OPTIONS: tuple[tuple[str, str | None, bool, str], ...] = (
+    ("--package-name", "NAME", False, "prefix for gtest classnames, suite names"),
+    ("--env", "K=V", True, "variables to set"),
+    ("--append-env", "K=V", True, "values to append to path-like variables (set when unset)"),
+    ("--output-file", "PATH", False, "also write all output to this file"),
+    (
+        "--generate-result-on-success",
+        None,
+        False,
+        "write a passed result when the command returns 0 and wrote none",
+    ),
+    ("--skip-test", None, False, "do not run; report skipped"),
+    (
+        "--skip-return-code",
+        "N",
+        False,
+        "report the test skipped when it returns N and wrote no result file",
+    ),
+)
 
 
 class UsageError(Exception):
@@ -32,58 +58,73 @@ class UsageError(Exception):
         self.result_file = result_file
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise UsageError(message)
+def help_text() -> str:
+    """What ``--help`` prints: every option, in the words ament's users know."""
+    rows = [("result_file", "the xUnit result file of the test"), ("-h, --help", "show this")]
+    for name, metavar, repeats, text in OPTIONS:
+        shown = f"{name} {metavar} [{metavar} ...]" if repeats else f"{name} {metavar or ''}"
+        rows.append((shown.strip(), text))
+    rows.append(("--command CMD ...", "the test command and all its arguments; must come last"))
+    width = max(len(left) for left, _ in rows) + 2
+    lines = [f"usage: {PROG} result_file [options] --command CMD ...", "", DESCRIPTION, ""]
+    lines += [f"  {left.ljust(width)}{text}" for left, text in rows]
+    return "\n".join([*lines, "", EPILOG, ""])
+
+
+def _option(word: str) -> tuple[str, str | None, bool]:
+    """The option ``word`` names (unique prefixes allowed, as run_test.py's argparse does)."""
+    matches = [item for item in OPTIONS if item[0] == word]
+    matches = matches or [item for item in OPTIONS if item[0].startswith(word)]
+    if len(matches) != 1:
+        known = ", ".join(item[0] for item in matches)
+        raise UsageError(
+            f"ambiguous option: {word} could match {known}"
+            if matches
+            else f"unrecognized arguments: {word}"
+        )
+    name, metavar, repeats, _help = matches[0]
+    return name, metavar, repeats
+
+
+def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[str]]]:
+    """Positional arguments and each option's values (a flag's list holds one ``""``)."""
+    positional: list[str] = []
+    values: dict[str, list[str]] = {}
+    index = 0
+    while index < len(argv):
+        word = argv[index]
+        index += 1
+        if not word.startswith("--") or word == "--":
+            if word.startswith("-") and word != "-":
+                raise UsageError(f"unrecognized arguments: {word}")
+            positional.append(word)
+            continue
+        word, equals, inline = word.partition("=")
+        name, metavar, repeats = _option(word)
+        if metavar is None:
+            if equals:
+                raise UsageError(f"argument {name}: ignored explicit argument {inline!r}")
+            values[name] = [""]
+            continue
+        taken = [inline] if equals else []
+        while index < len(argv) and not argv[index].startswith("-") and (repeats or not taken):
+            taken.append(argv[index])
+            index += 1
+        if not taken:
+            count = "at least one argument" if repeats else "one argument"
+            raise UsageError(f"argument {name}: expected {count}")
+        values[name] = [*values.get(name, []), *taken] if repeats else taken
+    return positional, values
 
 
 def _return_code(value: str) -> int:
-    code = int(value)
+    try:
+        code = int(value)
+    except ValueError:
+        code = -1
     if not 0 <= code <= 255:
-        raise argparse.ArgumentTypeError("must be between 0 and 255")
+        raise UsageError(f"argument --skip-return-code: {value!r} is not a code from 0 to 255")
     return code
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The same options as ament_cmake_test's run_test.py, explained for ``--help``."""
-    parser = _Parser(
-        prog=PROG,
-        description=(
-            "ctest RUNNER for ament_add_test / add_launch_test: reserves a free ROS_DOMAIN_ID "
-            "on this machine, runs the test with it and makes sure a result file is left. "
-            "Accepts the arguments of ament_cmake_test's run_test.py."
-        ),
-        epilog="Set DISABLE_ROS_ISOLATION=1 to run without a reserved domain ID.",
-    )
-    parser.add_argument("result_file", type=Path, help="the xUnit result file of the test")
-    parser.add_argument("--package-name", help="prefix for gtest classnames, suite names")
-    parser.add_argument("--env", nargs="+", default=[], metavar="K=V", help="variables to set")
-    parser.add_argument(
-        "--append-env",
-        nargs="+",
-        default=[],
-        metavar="K=V",
-        help="values to append to path-like variables (set when unset)",
-    )
-    parser.add_argument("--output-file", type=Path, help="also write all output to this file")
-    parser.add_argument(
-        "--generate-result-on-success",
-        action="store_true",
-        help="write a passed result when the command returns 0 and wrote none",
-    )
-    parser.add_argument("--skip-test", action="store_true", help="do not run; report skipped")
-    parser.add_argument(
-        "--skip-return-code",
-        type=_return_code,
-        metavar="N",
-        help="report the test skipped when it returns N and wrote no result file",
-    )
-    parser.add_argument(
-        "--command",
-        nargs=argparse.REMAINDER,
-        help="the test command and all its arguments; must come last",
-    )
-    return parser
 
 
 def _assignments(values: Sequence[str], option: str, append: bool) -> list[EnvAssignment]:
@@ -121,44 +162,47 @@ def parse(argv: Sequence[str]) -> RunRequest:
         index = argv.index("--command")
         argv, command = argv[:index], argv[index + 1 :]
     try:
-        args = build_parser().parse_args(argv)
+        positional, values = _parse_options(argv)
+        if not positional:
+            raise UsageError("the following arguments are required: result_file")
+        if len(positional) > 1:
+            raise UsageError(f"unrecognized arguments: {' '.join(positional[1:])}")
     except UsageError as error:
         raise UsageError(str(error), _guess_result_file(argv)) from None
+    result_file = Path(positional[0])
     if not command:
         raise UsageError(
-            "no test command: pass it after --command (it must come last)", args.result_file
+            "no test command: pass it after --command (it must come last)", result_file
         )
     try:
-        env = _assignments(args.env, "--env", append=False)
-        env += _assignments(args.append_env, "--append-env", append=True)
-    except UsageError as error:
-        raise UsageError(str(error), args.result_file) from None
-    try:
+        skip_code = values.get("--skip-return-code")
+        env = _assignments(values.get("--env", []), "--env", append=False)
+        env += _assignments(values.get("--append-env", []), "--append-env", append=True)
         wait_timeout = wait_timeout_from_env()
         override = os.environ.get(discovery.OVERRIDE_ENV, "").strip() or None
-    except ValueError as error:
-        raise UsageError(str(error), args.result_file) from None
-    return RunRequest(
-        command=tuple(command),
-        mode=Mode.AMENT,
-        wait_timeout=wait_timeout,
-        discovery_range=override,
-        result_file=args.result_file,
-        package_name=args.package_name,
-        output_file=args.output_file,
-        env=tuple(env),
-        skip_test=args.skip_test,
-        skip_return_code=args.skip_return_code,
-        generate_result_on_success=args.generate_result_on_success,
-        env_origin="--env (ament_add_test ENV)",
-    )
+        return RunRequest(
+            command=tuple(command),
+            mode=Mode.AMENT,
+            wait_timeout=wait_timeout,
+            discovery_range=override,
+            result_file=result_file,
+            package_name=values.get("--package-name", [None])[0],
+            output_file=Path(values["--output-file"][0]) if "--output-file" in values else None,
+            env=tuple(env),
+            skip_test="--skip-test" in values,
+            skip_return_code=_return_code(skip_code[0]) if skip_code else None,
+            generate_result_on_success="--generate-result-on-success" in values,
+            env_origin="--env (ament_add_test ENV)",
+        )
+    except (UsageError, ValueError) as error:
+        raise UsageError(str(error), result_file) from None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the RUNNER script."""
     argv = sys.argv[1:] if argv is None else argv
     if any(item in ("-h", "--help") for item in argv[: _command_index(argv)]):
-        build_parser().print_help()
+        sys.stdout.write(help_text())
         return exit_codes.PASSED
     try:
         request = parse(argv)

@@ -6,8 +6,9 @@ runner the same memory as one printing a line, and time stays linear.
 
 from __future__ import annotations
 
-import locale
-from typing import BinaryIO
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from typing import BinaryIO
 
 PREFIX = "-- ros-isolated-test: "
 #: Bytes of output kept for the result file: enough to see why a test failed.
@@ -77,6 +78,8 @@ class OutputCapture:
 
     def tail_text(self) -> str:
         """The tail decoded as run_test.py does: UTF-8, the locale's encoding, else shown."""
+        import locale
+
         data = self.tail_bytes()
         encodings = ["utf-8"]
         preferred = locale.getpreferredencoding(False)

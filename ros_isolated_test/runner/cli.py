@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import sys
-from dataclasses import asdict
 from importlib import resources
 from pathlib import Path
 
@@ -221,7 +220,7 @@ def status(as_json: bool) -> None:
             {
                 "domain_id": item.domain_id,
                 "via": item.via,
-                **(asdict(item.holder) if item.holder else {}),
+                **(item.holder.as_dict() if item.holder else {}),
             }
             for item in held
         ]
@@ -332,14 +331,15 @@ def normalise(source: Path, output: Path | None, package_name: str, test_name: s
     broken ones), as the runner does after every test; for tests that did not run
     through it. Exits 1 when the result reports failures or errors, like `report`.
     """
-    from ros_isolated_test.runner import result_file, results
+    from ros_isolated_test.atomic_file import write_atomically
+    from ros_isolated_test.runner import result_file
 
     name = test_name or test_name_of(source)
     data, failed = result_file.normalise_file(source, package_name, name)
     if output is None:
         click.echo(data.decode("utf-8"), nl=False)
     else:
-        results.write_atomically(output, data)
+        write_atomically(output, data)
     if failed:
         sys.exit(1)
 

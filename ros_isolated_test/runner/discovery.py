@@ -9,7 +9,6 @@ a real isolation, while processes of one test on one host still find each other.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 
 RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 LOCALHOST_ONLY_VAR = "ROS_LOCALHOST_ONLY"
@@ -26,17 +25,27 @@ class DiscoveryError(ValueError):
     """A range that cannot be used; the message names it and the choices."""
 
 
-@dataclass(frozen=True)
 class Discovery:
     """What the runner decided about discovery, and the variables that carry it."""
 
-    range: str
-    #: Who chose it: "runner default", "--discovery-range", "the environment", ...
-    source: str
-    updates: dict[str, str] = field(default_factory=dict)
-    removals: tuple[str, ...] = ()
-    peers: str = ""
-    warnings: tuple[str, ...] = ()
+    __slots__ = ("peers", "range", "removals", "source", "updates", "warnings")
+
+    def __init__(
+        self,
+        range: str,
+        source: str,
+        updates: dict[str, str] | None = None,
+        removals: tuple[str, ...] = (),
+        peers: str = "",
+        warnings: tuple[str, ...] = (),
+    ) -> None:
+        self.range = range
+        #: Who chose it: "runner default", "--discovery-range", "the environment", ...
+        self.source = source
+        self.updates: dict[str, str] = updates if updates is not None else {}
+        self.removals = removals
+        self.peers = peers
+        self.warnings = warnings
 
     def apply(self, env: Mapping[str, str]) -> dict[str, str]:
         """The test's environment with the decision in it."""

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 
 from ros_isolated_test.runner import discovery
 from ros_isolated_test.runner.request import EnvAssignment
@@ -22,18 +21,26 @@ class RefusedError(Exception):
     """Isolation cannot be promised; nothing may run. The message is one line."""
 
 
-@dataclass(frozen=True)
 class Policy:
     """What the runner decided before anything runs."""
 
-    #: Reserve a domain ID (False only with DISABLE_ROS_ISOLATION).
-    isolate: bool
-    #: The test's environment, without ROS_DOMAIN_ID when ``isolate`` is set.
-    env: dict[str, str]
-    #: Lines to print before the test starts (variables set, loud warnings).
-    notes: tuple[str, ...]
-    #: How far discovery reaches; None when isolation is disabled (nothing is changed).
-    discovery: discovery.Discovery | None = None
+    __slots__ = ("discovery", "env", "isolate", "notes")
+
+    def __init__(
+        self,
+        isolate: bool,
+        env: dict[str, str],
+        notes: tuple[str, ...],
+        discovery: discovery.Discovery | None = None,
+    ) -> None:
+        #: Reserve a domain ID (False only with DISABLE_ROS_ISOLATION).
+        self.isolate = isolate
+        #: The test's environment, without ROS_DOMAIN_ID when ``isolate`` is set.
+        self.env = env
+        #: Lines to print before the test starts (variables set, loud warnings).
+        self.notes = notes
+        #: How far discovery reaches; None when isolation is disabled (nothing is changed).
+        self.discovery = discovery
 
     def for_domain(self, domain_id: int) -> dict[str, str]:
         """The test's environment once ``domain_id`` is held."""

@@ -15,9 +15,8 @@ from collections.abc import Iterable
 
 from ros_isolated_test.runner.bounded_text import bounded
 from ros_isolated_test.runner.junit_model import Case, Outcome
-from ros_isolated_test.runner.xml_text import name_token
+from ros_isolated_test.runner.xml_text import TEXT_LIMIT, name_token
 from ros_isolated_test.runner.xunit_reader import (
-    TEXT_LIMIT,
     RawCase,
     RawOutcome,
     ReadResult,

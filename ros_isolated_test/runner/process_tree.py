@@ -8,18 +8,22 @@ from __future__ import annotations
 
 import contextlib
 import os
-from dataclasses import dataclass
 
 
-@dataclass(frozen=True)
 class Process:
     """One process as /proc shows it."""
 
-    pid: int
-    ppid: int
-    pgid: int
-    state: str
-    name: str
+    __slots__ = ("name", "pgid", "pid", "ppid", "state")
+
+    def __init__(self, pid: int, ppid: int, pgid: int, state: str, name: str) -> None:
+        self.pid = pid
+        self.ppid = ppid
+        self.pgid = pgid
+        self.state = state
+        self.name = name
+
+    def __repr__(self) -> str:
+        return f"Process({self.pid}, {self.name!r}, state={self.state})"
 
 
 def _read(pid: str) -> Process | None:

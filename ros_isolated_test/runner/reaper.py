@@ -9,7 +9,6 @@ them, or zombies pile up.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import os
 
 _PR_SET_CHILD_SUBREAPER = 36
@@ -19,6 +18,8 @@ def become_subreaper() -> bool:
     """Adopt orphaned descendants (Linux 3.4+); False where the kernel says no."""
     if os.getpid() == 1:
         return True  # PID 1 adopts every orphan of its namespace anyway.
+    import ctypes
+
     try:
         # The running process's own symbols: no ldconfig lookup (find_library runs one).
         libc = ctypes.CDLL(None, use_errno=True)
@@ -43,3 +44,12 @@ def reap_orphans(keep: int | None = None) -> int:
         with contextlib.suppress(ChildProcessError):
             os.waitpid(info.si_pid, 0)
             reaped += 1
+
+
+def has_children() -> bool:
+    """Whether any child of ours exists, exited or not: one system call, no /proc scan."""
+    try:
+        os.waitid(os.P_ALL, 0, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+    except ChildProcessError:
+        return False
+    return True

@@ -1,11 +1,14 @@
-"""The one request every entry point builds: shell ``run``, ctest RUNNER, Docker entrypoint."""
+"""The one request every entry point builds: shell ``run``, ctest RUNNER, Docker entrypoint.
+
+Plain classes rather than dataclasses, as everywhere on a test's path: importing
+``dataclasses`` would cost more than the runner's own work.
+"""
 
 from __future__ import annotations
 
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
@@ -49,36 +52,83 @@ def test_name_of(result_file: Path) -> str:
     return name
 
 
-@dataclass(frozen=True)
 class EnvAssignment:
     """One ``--env`` (``append=False``) or ``--append-env`` (``append=True``) argument."""
 
-    name: str
-    value: str
-    append: bool = False
+    __slots__ = ("append", "name", "value")
+
+    def __init__(self, name: str, value: str, append: bool = False) -> None:
+        self.name = name
+        self.value = value
+        self.append = append
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, EnvAssignment):
+            return NotImplemented
+        return (self.name, self.value, self.append) == (other.name, other.value, other.append)
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.value, self.append))
+
+    def __repr__(self) -> str:
+        return f"EnvAssignment({self.name!r}, {self.value!r}, append={self.append})"
 
 
-@dataclass(frozen=True)
 class RunRequest:
     """Everything needed to reserve a domain, run one test and write its result."""
 
-    command: tuple[str, ...]
-    mode: Mode
-    result_file: Path | None = None
-    package_name: str | None = None
-    output_file: Path | None = None
-    env: tuple[EnvAssignment, ...] = ()
-    skip_test: bool = False
-    skip_return_code: int | None = None
-    generate_result_on_success: bool = False
-    timeout: float | None = None
-    kill_grace: float = 5.0
-    #: --discovery-range (or its variable); None: the runner's default policy.
-    discovery_range: str | None = None
-    #: How long to wait for a free ID when the pool is full, in seconds.
-    wait_timeout: float = DEFAULT_WAIT_TIMEOUT
-    #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
-    env_origin: str = "--env"
+    __slots__ = (
+        "command",
+        "discovery_range",
+        "env",
+        "env_origin",
+        "generate_result_on_success",
+        "kill_grace",
+        "mode",
+        "output_file",
+        "package_name",
+        "result_file",
+        "skip_return_code",
+        "skip_test",
+        "timeout",
+        "wait_timeout",
+    )
+
+    def __init__(
+        self,
+        command: tuple[str, ...],
+        mode: Mode,
+        *,
+        result_file: Path | None = None,
+        package_name: str | None = None,
+        output_file: Path | None = None,
+        env: tuple[EnvAssignment, ...] = (),
+        skip_test: bool = False,
+        skip_return_code: int | None = None,
+        generate_result_on_success: bool = False,
+        timeout: float | None = None,
+        kill_grace: float = 5.0,
+        discovery_range: str | None = None,
+        wait_timeout: float = DEFAULT_WAIT_TIMEOUT,
+        env_origin: str = "--env",
+    ) -> None:
+        self.command = command
+        self.mode = mode
+        self.result_file = result_file
+        self.package_name = package_name
+        self.output_file = output_file
+        self.env = env
+        self.skip_test = skip_test
+        self.skip_return_code = skip_return_code
+        self.generate_result_on_success = generate_result_on_success
+        self.timeout = timeout
+        self.kill_grace = kill_grace
+        #: --discovery-range (or its variable); None: the runner's default policy.
+        self.discovery_range = discovery_range
+        #: How long to wait for a free ID when the pool is full, in seconds.
+        self.wait_timeout = wait_timeout
+        #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
+        self.env_origin = env_origin
 
     @property
     def test_name(self) -> str:

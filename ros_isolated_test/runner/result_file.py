@@ -11,14 +11,18 @@ import contextlib
 import errno
 import os
 import shlex
-import shutil
 import sys
 import time
 from pathlib import Path
 
-from ros_isolated_test.runner import normaliser, results, xunit_reader
+from ros_isolated_test.atomic_file import write_atomically
+from ros_isolated_test.runner import results
 from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
-from ros_isolated_test.runner.request import RunRequest
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from ros_isolated_test.runner import xunit_reader
+    from ros_isolated_test.runner.request import RunRequest
 
 NO_RESULT = "The test did not generate a result file."
 ORIGINAL_SUFFIX = ".orig"
@@ -53,6 +57,8 @@ class ResultFile:
             assert stale is not None
             with contextlib.suppress(FileNotFoundError):
                 if stale.is_dir() and not stale.is_symlink():
+                    import shutil
+
                     shutil.rmtree(stale)
                 else:
                     stale.unlink()
@@ -70,9 +76,13 @@ class ResultFile:
         return f"{self.request.package}.{self.request.test_name}"
 
     def write(
-        self, cases: list[Case], duration: float = 0.0, output: str = ""
+        self, cases: list[Case], duration: float = 0.0, output: str = "", validate: bool = False
     ) -> results.Rendered | None:
-        """Write the canonical file holding ``cases``; None when no file was asked for."""
+        """Write the canonical file holding ``cases``; None when no file was asked for.
+
+        ``validate`` when the cases came from the test's own file: the runner's own
+        results have a fixed shape, checked against the schema by the test suite.
+        """
         if self.path is None:
             return None
         suite = Suite(
@@ -84,9 +94,9 @@ class ResultFile:
             properties=dict(self.properties),
             system_out=output,
         )
-        rendered = results.render(suite)
+        rendered = results.render(suite, validate)
         try:
-            results.write_atomically(self.path, rendered.data)
+            write_atomically(self.path, rendered.data)
         except OSError as error:
             self.write_error = f"cannot write result file {self.path}: {error.strerror or error}"
             with contextlib.suppress(OSError, ValueError):
@@ -129,6 +139,8 @@ def read_cases(
     path: Path, package: str | None, test_name: str
 ) -> tuple[list[Case], xunit_reader.ReadResult]:
     """The canonical cases of any result file, and what reading it found."""
+    from ros_isolated_test.runner import normaliser, xunit_reader
+
     read = xunit_reader.read(path)
     return normaliser.cases_from(read, package, test_name), read
 

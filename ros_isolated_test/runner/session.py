@@ -9,26 +9,27 @@ from __future__ import annotations
 import contextlib
 import os
 import shlex
-import signal
 import sys
-import threading
 from collections.abc import Iterator
 from pathlib import Path
-from types import FrameType
-from typing import BinaryIO
 
-from ros_isolated_test.domain_coordinator import (
+from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
+from ros_isolated_test.domain_coordinator.pool import PoolSpecError
+from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
-    LockDirError,
     PoolExhaustedError,
-    PoolSpecError,
 )
-from ros_isolated_test.runner import environment, exit_codes, normaliser, supervisor
+from ros_isolated_test.runner import environment, exit_codes, supervisor
 from ros_isolated_test.runner.capture import OutputCapture
 from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.junit_model import Outcome
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.result_file import NO_RESULT, ResultFile
+
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from types import FrameType
+    from typing import BinaryIO
 
 
 def run(request: RunRequest, console: BinaryIO | None = None) -> int:
@@ -141,10 +142,9 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
 
     Needed for a runner queued for an ID (and for PID 1, which has no default action).
     Once the test has run, a signal (while the ID is released) is only remembered.
+    Outside the main thread (an embedding program) handlers cannot be set: the
+    program's own stay.
     """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
 
     def stop(signum: int, _frame: FrameType | None) -> None:
         if guard.test_started:
@@ -152,12 +152,11 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
             return
         raise Interrupted(signum)
 
-    previous = {signum: signal.signal(signum, stop) for signum in supervisor.FORWARDED_SIGNALS}
+    previous = supervisor.set_handlers(stop)
     try:
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        supervisor.restore_handlers(previous)
 
 
 @contextlib.contextmanager
@@ -219,6 +218,8 @@ def _conclude(
             detail = f"{NO_RESULT} {detail}"
         result.write([result.case(kind, f"{detail}\n\n{output}", duration)], duration)
         return code
+    from ros_isolated_test.runner import normaliser
+
     cases = result.adopt()
     for problem in result.problems:
         capture.note(f"result file {result.path}: {problem}")
@@ -232,7 +233,8 @@ def _conclude(
             )
         )
     failed = any(case.outcome.failed for case in cases)
-    rendered = result.write(cases, duration, capture.tail_text() if failed or code else "")
+    output = capture.tail_text() if failed or code else ""
+    rendered = result.write(cases, duration, output, validate=True)
     if rendered is not None and rendered.failed:
         capture.note(f"the result file {result.path} reports failures or errors")
         return code or exit_codes.FAILED

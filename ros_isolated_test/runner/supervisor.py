@@ -11,18 +11,22 @@ and only then does the caller release the domain ID.
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import os
-import selectors
+import select
 import signal
-import subprocess
-import threading
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from types import FrameType
+from collections.abc import Callable, Mapping, Sequence
 
 from ros_isolated_test.runner import process_tree, reaper
 from ros_isolated_test.runner.capture import OutputCapture
+
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from types import FrameType
+
+    Handler = Callable[[int, FrameType | None], object] | int | signal.Handlers | None
 
 CHUNK_BYTES = 64 * 1024
 #: How long to keep draining output after the test exited, while bytes keep coming.
@@ -32,20 +36,39 @@ DRAIN_LIMIT_SECONDS = 1.0
 POLL_SECONDS = 0.2
 #: Signals that end a run: passed on to the test, then the same cleanup as a timeout.
 FORWARDED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: Reset to their default in the test: Python ignores SIGPIPE, and so would the test.
+_DEFAULT_IN_TEST = (signal.SIGPIPE, signal.SIGXFSZ)
 
 
-@dataclass(frozen=True)
 class Outcome:
     """How the test ended. Exactly one of ``returncode`` / ``start_error`` is set."""
 
-    returncode: int | None
-    duration: float
-    timed_out: bool = False
-    start_error: OSError | None = None
-    #: A signal the runner received and passed on (Ctrl-C, SIGTERM from a container stop).
-    received_signal: int | None = None
-    #: Processes of the test still alive after its main process ended, then stopped.
-    leftovers: tuple[str, ...] = field(default_factory=tuple)
+    __slots__ = (
+        "duration",
+        "leftovers",
+        "received_signal",
+        "returncode",
+        "start_error",
+        "timed_out",
+    )
+
+    def __init__(
+        self,
+        returncode: int | None,
+        duration: float,
+        timed_out: bool = False,
+        start_error: OSError | None = None,
+        received_signal: int | None = None,
+        leftovers: tuple[str, ...] = (),
+    ) -> None:
+        self.returncode = returncode
+        self.duration = duration
+        self.timed_out = timed_out
+        self.start_error = start_error
+        #: A signal the runner received and passed on (Ctrl-C, SIGTERM from a container stop).
+        self.received_signal = received_signal
+        #: Processes of the test still alive after its main process ended, then stopped.
+        self.leftovers = leftovers
 
     @property
     def signal(self) -> int | None:
@@ -55,23 +78,42 @@ class Outcome:
         return None
 
 
+def set_handlers(handler: Callable[[int, FrameType | None], object]) -> dict[int, Handler]:
+    """Handle every forwarded signal with ``handler``; the previous handlers, to restore.
+
+    Outside the main thread (a program embedding the runner) none can be set, and the
+    program's own handlers stay: returns an empty dict.
+    """
+    previous: dict[int, Handler] = {}
+    try:
+        for signum in FORWARDED_SIGNALS:
+            previous[signum] = signal.signal(signum, handler)
+    except ValueError:
+        restore_handlers(previous)
+        return {}
+    return previous
+
+
+def restore_handlers(previous: dict[int, Handler]) -> None:
+    """Put back what :func:`set_handlers` replaced."""
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)
+
+
 class _Signals:
     """Signal handlers for the test's lifetime: pass the signal on, remember it."""
 
     def __init__(self) -> None:
         self.received: int | None = None
         self.at: float | None = None
-        self._previous: dict[int, object] = {}
+        self._previous: dict[int, Handler] = {}
 
     def __enter__(self) -> _Signals:
-        if threading.current_thread() is threading.main_thread():
-            for signum in FORWARDED_SIGNALS:
-                self._previous[signum] = signal.signal(signum, self._forward)
+        self._previous = set_handlers(self._forward)
         return self
 
     def __exit__(self, *_exc: object) -> None:
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)  # type: ignore[arg-type]
+        restore_handlers(self._previous)
 
     def _forward(self, signum: int, _frame: FrameType | None) -> None:
         if self.received is None:
@@ -83,6 +125,101 @@ class _Signals:
             group = os.getpgrp()
             targets = [target for target in targets if target.pgid != group]
         process_tree.signal_all(targets, signum)
+
+
+class _Test:
+    """The test's main process and the read end of its output pipe.
+
+    Started with ``posix_spawn``, not ``subprocess``: the one call the runner needs
+    does not pay for importing subprocess (and threading, selectors) on every test.
+    """
+
+    def __init__(self, command: Sequence[str], env: Mapping[str, str]) -> None:
+        read_fd, write_fd = (_above_stdio(fd) for fd in os.pipe())
+        try:
+            _close_inherited_on_exec()
+            executable = _executable(command[0], env)
+            try:
+                self.pid = os.posix_spawn(
+                    executable,
+                    list(command),
+                    dict(env),
+                    file_actions=[
+                        (os.POSIX_SPAWN_DUP2, write_fd, 1),
+                        (os.POSIX_SPAWN_DUP2, write_fd, 2),
+                    ],
+                    setsigdef=_DEFAULT_IN_TEST,
+                )
+            except OSError as error:
+                # Name the command as given, not the path it was found at.
+                raise type(error)(error.errno, error.strerror, command[0]) from None
+        except BaseException:
+            os.close(read_fd)
+            raise
+        finally:
+            os.close(write_fd)
+        self.stdout = read_fd
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        """The exit code (negative: killed by that signal), or None while it runs."""
+        if self.returncode is None:
+            try:
+                pid, status = os.waitpid(self.pid, os.WNOHANG)
+            except ChildProcessError:
+                return None
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int | None:
+        """Wait for the exit code; None if ``timeout`` seconds pass first."""
+        if timeout is None:
+            while self.returncode is None:
+                _pid, status = os.waitpid(self.pid, 0)
+                self.returncode = os.waitstatus_to_exitcode(status)
+            return self.returncode
+        deadline = time.monotonic() + timeout
+        delay = 0.0005
+        while self.poll() is None:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return None
+            time.sleep(min(delay, remaining))
+            delay = min(delay * 2, 0.05)
+        return self.returncode
+
+
+def _above_stdio(fd: int) -> int:
+    """``fd`` moved above 0-2, so it can never be one of the test's standard streams."""
+    if fd > 2:
+        return fd
+    moved = fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 3)
+    os.close(fd)
+    return moved
+
+
+def _close_inherited_on_exec() -> None:
+    """Descriptors the runner inherited (a jobserver, a parent's pipes) stay out of the test."""
+    with contextlib.suppress(OSError):
+        for name in os.listdir("/proc/self/fd"):
+            if int(name) > 2:
+                with contextlib.suppress(OSError):
+                    os.set_inheritable(int(name), False)
+
+
+def _executable(name: str, env: Mapping[str, str]) -> str:
+    """``name`` found on the test's PATH (not the runner's), as a shell would find it."""
+    if os.sep in name:
+        return name
+    candidates = [os.path.join(folder, name) for folder in os.get_exec_path(dict(env))]
+    for path in candidates:
+        if os.path.isfile(path) and os.access(path, os.X_OK):
+            return path
+    for path in candidates:
+        if os.path.exists(path):
+            return path  # not executable: starting it gives the exact error
+    raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), name)
 
 
 def _from_terminal() -> bool:
@@ -106,25 +243,27 @@ def run(
     # Handlers before the test exists: a signal arriving as it starts must reach it too.
     with _Signals() as signals:
         try:
-            process = subprocess.Popen(
-                list(command), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=dict(env)
-            )
+            test = _Test(command, env)
         except OSError as error:
             return Outcome(returncode=None, duration=time.monotonic() - start, start_error=error)
-        if signals.received is not None:
-            # It came while the test was being started, before it could be passed on.
-            process_tree.signal_tree(process.pid, signals.received)
         try:
-            timed_out = _pump(process, capture, start, timeout, kill_grace, signals)
-        except BaseException:
-            # Whatever went wrong in the runner, the test must not outlive it unseen.
-            process_tree.signal_tree(process.pid, signal.SIGKILL)
-            process.wait()
-            _end_leftovers(0.0)
-            raise
-        returncode = process.wait()
-        leftovers = _end_leftovers(kill_grace)
-        _drain(process, capture)
+            if signals.received is not None:
+                # It came while the test was being started, before it could be passed on.
+                process_tree.signal_tree(test.pid, signals.received)
+            try:
+                timed_out = _pump(test, capture, start, timeout, kill_grace, signals)
+            except BaseException:
+                # Whatever went wrong in the runner, the test must not outlive it unseen.
+                process_tree.signal_tree(test.pid, signal.SIGKILL)
+                test.wait()
+                _end_leftovers(0.0)
+                raise
+            returncode = test.wait()
+            leftovers = _end_leftovers(kill_grace)
+            _drain(test, capture)
+        finally:
+            os.close(test.stdout)
+    assert returncode is not None
     return Outcome(
         returncode=returncode,
         duration=time.monotonic() - start,
@@ -135,7 +274,7 @@ def run(
 
 
 def _pump(
-    process: subprocess.Popen[bytes],
+    test: _Test,
     capture: OutputCapture,
     start: float,
     timeout: float | None,
@@ -149,62 +288,60 @@ def _pump(
     A timeout (or a signal the runner passed on) gives the test ``kill_grace`` seconds
     after SIGTERM before SIGKILL.
     """
-    assert process.stdout is not None
-    fd = process.stdout.fileno()
+    fd = test.stdout
     os.set_blocking(fd, False)
     deadline = start + timeout if timeout is not None else None
     kill_at: float | None = None
     timed_out = False
     pipe_open = True
     drain_until: float | None = None
-    with selectors.DefaultSelector() as selector:
-        selector.register(fd, selectors.EVENT_READ)
-        while True:
-            now = time.monotonic()
-            if deadline is not None and not timed_out and now >= deadline:
-                timed_out = True
-                _signal(process, signal.SIGTERM)
-                kill_at = now + kill_grace
-            if signals.at is not None and kill_at is None and not timed_out:
-                kill_at = signals.at + kill_grace
-            if kill_at is not None and now >= kill_at:
-                _signal(process, signal.SIGKILL)
-            reaper.reap_orphans(keep=process.pid)
-            exited = process.poll() is not None
-            if exited and drain_until is None:
-                drain_until = now + DRAIN_LIMIT_SECONDS
-            if exited and (not pipe_open or now >= (drain_until or now)):
-                # A leftover that keeps printing must not hold the runner: it is stopped
-                # next, and what it wrote by then is drained.
+    poller = select.poll()
+    poller.register(fd, select.POLLIN)
+    while True:
+        now = time.monotonic()
+        if deadline is not None and not timed_out and now >= deadline:
+            timed_out = True
+            _signal(test, signal.SIGTERM)
+            kill_at = now + kill_grace
+        if signals.at is not None and kill_at is None and not timed_out:
+            kill_at = signals.at + kill_grace
+        if kill_at is not None and now >= kill_at:
+            _signal(test, signal.SIGKILL)
+        reaper.reap_orphans(keep=test.pid)
+        exited = test.poll() is not None
+        if exited and drain_until is None:
+            drain_until = now + DRAIN_LIMIT_SECONDS
+        if exited and (not pipe_open or now >= (drain_until or now)):
+            # A leftover that keeps printing must not hold the runner: it is stopped
+            # next, and what it wrote by then is drained.
+            break
+        wait = DRAIN_IDLE_SECONDS if exited else POLL_SECONDS
+        for limit in (None if timed_out else deadline, kill_at):
+            if limit is not None:
+                wait = min(wait, max(0.0, limit - now))
+        if not pipe_open:
+            test.wait(wait)
+            continue
+        if not poller.poll(wait * 1000):
+            if exited:
                 break
-            wait = DRAIN_IDLE_SECONDS if exited else POLL_SECONDS
-            for limit in (None if timed_out else deadline, kill_at):
-                if limit is not None:
-                    wait = min(wait, max(0.0, limit - now))
-            if not pipe_open:
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    process.wait(wait)
-                continue
-            if not selector.select(wait):
-                if exited:
-                    break
-                continue
-            try:
-                chunk = os.read(fd, CHUNK_BYTES)
-            except BlockingIOError:
-                continue
-            if chunk:
-                capture.feed(chunk)
-            else:
-                pipe_open = False
-                selector.unregister(fd)
+            continue
+        try:
+            chunk = os.read(fd, CHUNK_BYTES)
+        except BlockingIOError:
+            continue
+        if chunk:
+            capture.feed(chunk)
+        else:
+            pipe_open = False
+            poller.unregister(fd)
     return timed_out
 
 
-def _signal(process: subprocess.Popen[bytes], signum: int) -> None:
+def _signal(test: _Test, signum: int) -> None:
     """Signal the test and everything it started, while the test is still there."""
-    if process.poll() is None:
-        process_tree.signal_tree(process.pid, signum)
+    if test.poll() is None:
+        process_tree.signal_tree(test.pid, signum)
 
 
 def _end_leftovers(grace: float) -> tuple[str, ...]:
@@ -212,6 +349,11 @@ def _end_leftovers(grace: float) -> tuple[str, ...]:
 
     Returns a description of each process that had to be stopped.
     """
+    reaper.reap_orphans()
+    if not reaper.has_children():
+        # Every living descendant has a living child of ours above it (orphans are
+        # re-parented to us, the subreaper): none at all means nothing is left.
+        return ()
     me = os.getpid()
     leftovers = process_tree.descendants(me)
     if not leftovers:
@@ -233,11 +375,8 @@ def _end_leftovers(grace: float) -> tuple[str, ...]:
     return tuple(f"{item.pid} ({item.name})" for item in leftovers)
 
 
-def _drain(process: subprocess.Popen[bytes], capture: OutputCapture) -> None:
-    """Take what the stopped leftovers wrote, without waiting; then close the pipe."""
-    assert process.stdout is not None
-    fd = process.stdout.fileno()
+def _drain(test: _Test, capture: OutputCapture) -> None:
+    """Take what the stopped leftovers wrote, without waiting."""
     with contextlib.suppress(OSError, ValueError):
-        while chunk := os.read(fd, CHUNK_BYTES):
+        while chunk := os.read(test.stdout, CHUNK_BYTES):
             capture.feed(chunk)
-    process.stdout.close()

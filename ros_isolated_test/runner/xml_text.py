@@ -3,13 +3,27 @@
 from __future__ import annotations
 
 import re
+from functools import cache
 
 from ros_isolated_test.runner.bounded_text import bounded
 
-#: Colour and cursor codes: noise in a report, and ESC is illegal in XML anyway.
-ANSI_ESCAPE = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-Z\\-_]")
-#: The illegal characters above 0x1F, and U+FFFD, which xunit-viewer cannot take: rare.
-RARE_ILLEGAL = re.compile("[\ud800-\udfff\ufffd-\uffff]")
+#: Characters kept of one text (a message, a failure's text, a system-out).
+TEXT_LIMIT = 64 * 1024
+
+
+@cache
+def ansi_escape() -> re.Pattern[str]:
+    """Colour and cursor codes: noise in a report, and ESC is illegal in XML anyway.
+
+    Compiled on first use, as the next one: most runs never write a character they match.
+    """
+    return re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-Z\\-_]")
+
+
+@cache
+def rare_illegal() -> re.Pattern[str]:
+    """The illegal characters above 0x1F, and U+FFFD, which xunit-viewer cannot take."""
+    return re.compile("[\ud800-\udfff\ufffd-\uffff]")
 
 
 def legal(code: int) -> bool:
@@ -36,9 +50,11 @@ def xml_safe(text: str, limit: int | None = None) -> str:
 
     Over ``limit`` the head and tail are kept around a marked cut.
     """
-    text = ANSI_ESCAPE.sub("", text).translate(CONTROL_TABLE)
-    if RARE_ILLEGAL.search(text):
-        text = RARE_ILLEGAL.sub(lambda match: shown_code(ord(match.group())), text)
+    if "\x1b" in text:
+        text = ansi_escape().sub("", text)
+    text = text.translate(CONTROL_TABLE)
+    if not text.isascii() and rare_illegal().search(text):
+        text = rare_illegal().sub(lambda match: shown_code(ord(match.group())), text)
     return text if limit is None else bounded(text, limit)
 
 

@@ -25,15 +25,15 @@ from lxml import etree
 
 from ros_isolated_test.runner import xml_text
 from ros_isolated_test.runner.bounded_text import BoundedText, bounded
+from ros_isolated_test.runner.xml_text import TEXT_LIMIT
 
 #: Read at most this much of a file; the rest is reported, not parsed.
 MAX_READ_BYTES = 256 * 1024 * 1024
 CHUNK_BYTES = 1024 * 1024
 #: Test cases kept in full; later ones are only counted.
 MAX_CASES = 5000
-#: Characters kept of one text (a message, a failure's text, a system-out) ...
-TEXT_LIMIT = 64 * 1024
-#: ... until all texts together reach this; after that each keeps only SMALL_TEXT_LIMIT.
+#: Each text keeps up to TEXT_LIMIT characters until all texts together reach this;
+#: after that each keeps only SMALL_TEXT_LIMIT.
 TEXT_BUDGET = 2 * 1024 * 1024
 SMALL_TEXT_LIMIT = 200
 NAME_LIMIT = 256
@@ -280,13 +280,14 @@ class _Sanitiser:
             if held:
                 cut = len(text) - len(tail) + min(held)
                 text, self.carry = text[:cut], text[cut:]
-        text = xml_text.ANSI_ESCAPE.sub("", text)
+        if "\x1b" in text:
+            text = xml_text.ansi_escape().sub("", text)
         shown = text.translate(xml_text.CONTROL_TABLE)
         # Each control character shown grows by 3 (\x01 for one character).
         self.illegal += (len(shown) - len(text)) // 3
         text = shown
-        if xml_text.RARE_ILLEGAL.search(text):
-            text = xml_text.RARE_ILLEGAL.sub(self._show, text)
+        if not text.isascii() and xml_text.rare_illegal().search(text):
+            text = xml_text.rare_illegal().sub(self._show, text)
         if "&#" in text:
             text = _CHAR_REF.sub(self._show_reference, text)
         if self.in_prolog:

@@ -6,10 +6,9 @@ hands its arguments over; all behaviour lives in ``ros_isolated_test``.
 """
 
 import os
-import shutil
 import sys
-from typing import TYPE_CHECKING
 
+TYPE_CHECKING = False  # typing is not imported: this file starts every test
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -18,6 +17,8 @@ _REEXEC_MARK = "_ROS_ISOLATED_TEST_REEXEC"
 
 def _interpreter_of_cli() -> "str | None":
     """The Python named in the ``ros-isolated-test`` script's shebang, if there is one."""
+    import shutil
+
     script = shutil.which("ros-isolated-test")
     if script is None:
         return None

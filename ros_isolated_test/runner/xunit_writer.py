@@ -1,0 +1,125 @@
+"""Canonical xUnit bytes from a :class:`~ros_isolated_test.runner.junit_model.Suite`.
+
+A serializer of one fixed shape, on the standard library only: every test's runner
+writes a result file, and loading lxml for that would cost it more than all the rest of
+its own work. Escaping lives in :func:`attribute` and :func:`text`, the only two places
+a value enters the document; the layout matches lxml's ``pretty_print`` output, and the
+test suite parses and validates what this writes against ``schemas/junit.xsd``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from ros_isolated_test import __version__
+from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
+from ros_isolated_test.runner.xml_text import TEXT_LIMIT, name_token, xml_safe
+
+DECLARATION = "<?xml version='1.0' encoding='UTF-8'?>\n"
+# Tabs and line ends in an attribute would come back as spaces (attribute-value
+# normalisation), and a CR in text as LF: written as character references, they survive.
+_ATTRIBUTE = str.maketrans(
+    {
+        "&": "&amp;",
+        "<": "&lt;",
+        ">": "&gt;",
+        '"': "&quot;",
+        "\n": "&#10;",
+        "\r": "&#13;",
+        "\t": "&#9;",
+    }
+)
+_TEXT = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", "\r": "&#13;"})
+
+
+def attribute(value: str) -> str:
+    """A legal-XML value escaped for a double-quoted attribute."""
+    return value.translate(_ATTRIBUTE)
+
+
+def text(value: str) -> str:
+    """A legal-XML value escaped for element content."""
+    return value.translate(_TEXT)
+
+
+def _seconds(value: float) -> str:
+    return f"{max(value, 0.0):.3f}"
+
+
+def _start(tag: str, attributes: Iterable[tuple[str, str]]) -> str:
+    pairs = "".join(f' {name}="{attribute(value)}"' for name, value in attributes)
+    return f"<{tag}{pairs}"
+
+
+def _output(lines: list[str], indent: str, out: str, err: str) -> None:
+    for tag, value in (("system-out", out), ("system-err", err)):
+        safe = xml_safe(value, TEXT_LIMIT)
+        if safe.strip():
+            lines.append(f"{indent}<{tag}>{text(safe)}</{tag}>\n")
+
+
+def _case(lines: list[str], case: Case) -> None:
+    head = _start(
+        "testcase",
+        (
+            ("classname", name_token(case.classname, "unnamed")),
+            ("name", name_token(case.name, "unnamed")),
+            ("time", _seconds(case.time)),
+        ),
+    )
+    body: list[str] = []
+    if case.outcome is not Outcome.PASSED:
+        message = xml_safe(case.message, TEXT_LIMIT)
+        attributes = [("message", message)]
+        if case.type:
+            attributes.append(("type", xml_safe(case.type, 256)))
+        content = xml_safe(case.text, TEXT_LIMIT) or message
+        tag = case.outcome.value
+        outcome = _start(tag, attributes)
+        body.append(
+            f"      {outcome}>{text(content)}</{tag}>\n" if content else f"      {outcome}/>\n"
+        )
+    _output(body, "      ", case.system_out, case.system_err)
+    if body:
+        lines.extend((f"    {head}>\n", *body, "    </testcase>\n"))
+    else:
+        lines.append(f"    {head}/>\n")
+
+
+def serialize(suite: Suite) -> bytes:
+    """The ``<testsuites>`` document of one suite, counts recomputed from its cases."""
+    name = name_token(suite.name, "ros_isolated_test.result")
+    counts = (
+        ("tests", str(len(suite.cases))),
+        ("failures", str(suite.count(Outcome.FAILURE))),
+        ("errors", str(suite.count(Outcome.ERROR))),
+    )
+    skipped = ("skipped", str(suite.count(Outcome.SKIPPED)))
+    duration = ("time", _seconds(suite.time))
+    lines = [
+        DECLARATION,
+        _start("testsuites", (("name", name), *counts, duration)) + ">\n",
+        "  "
+        + _start(
+            "testsuite",
+            (
+                ("name", name),
+                *counts,
+                skipped,
+                duration,
+                ("timestamp", suite.timestamp),
+                ("hostname", name_token(suite.hostname, "localhost", 255)),
+            ),
+        )
+        + ">\n",
+        "    <properties>\n",
+    ]
+    for key, value in {**suite.properties, "runner_version": __version__}.items():
+        pair = (("name", name_token(key, "property")), ("value", xml_safe(value, 4096)))
+        lines.append(f"      {_start('property', pair)}/>\n")
+    lines.append("    </properties>\n")
+    for case in suite.cases:
+        _case(lines, case)
+    _output(lines, "    ", suite.system_out, suite.system_err)
+    lines.append("  </testsuite>\n</testsuites>\n")
+    return "".join(lines).encode("utf-8")

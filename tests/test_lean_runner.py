@@ -1,0 +1,209 @@
+"""What keeps a test's runner cheap, checked by what it loads and does, never by a clock.
+
+Every ctest test pays the RUNNER's start-up (benches/ measures it). The heavy modules
+(lxml, filelock, subprocess, dataclasses, typing, json, argparse, tempfile, socket)
+stay unloaded on the common path; they load only where they are needed: lxml when the
+test wrote its own result file, filelock when a runner has to queue for an ID. Also
+here: the test is started as ``subprocess`` would start it (its PATH, default SIGPIPE,
+no inherited descriptors), and a ``filelock`` lock and our reservation exclude each other.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import filelock
+import pytest
+from conftest import run_runner
+from test_domain_coordinator import free_ids
+
+from ros_isolated_test.domain_coordinator import DomainCoordinator
+from ros_isolated_test.domain_coordinator.reservation import lock_path
+
+#: Modules the common path must not load: each costs more than a millisecond.
+HEAVY = (
+    "lxml",
+    "filelock",
+    "subprocess",
+    "dataclasses",
+    "typing",
+    "json",
+    "argparse",
+    "tempfile",
+    "socket",
+    "threading",
+    "inspect",
+    "click",
+)
+
+
+def _loaded_by(runner_script: str, args: list[str], env: dict[str, str], cwd: Path) -> set[str]:
+    """Top-level names of the modules a runner process imported (``-X importtime``)."""
+    proc = subprocess.run(
+        [sys.executable, "-X", "importtime", "-u", runner_script, *args],
+        env=env,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    names = set()
+    for line in proc.stderr.splitlines():
+        if line.startswith("import time:") and "|" in line:
+            names.add(line.rsplit("|", 1)[1].strip())
+    assert names, proc.stderr
+    return names
+
+
+def _baseline(env: dict[str, str]) -> set[str]:
+    proc = subprocess.run(
+        [sys.executable, "-X", "importtime", "-c", "pass"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    return {
+        line.rsplit("|", 1)[1].strip()
+        for line in proc.stderr.splitlines()
+        if line.startswith("import time:") and "|" in line
+    }
+
+
+def _heavy(names: set[str], baseline: set[str]) -> list[str]:
+    return sorted(name for name in names - baseline if name.split(".")[0] in HEAVY)
+
+
+def test_a_passing_test_without_own_result_file_loads_nothing_heavy(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    result = tmp_path / "pkg" / "t.xml"
+    args = [str(result), "--package-name", "pkg", "--generate-result-on-success"]
+    names = _loaded_by(runner_script, [*args, "--command", "true"], env, tmp_path)
+    assert _heavy(names, _baseline(env)) == []
+    assert "ros_isolated_test.runner.session" in names, "the check must see the real run"
+    assert result.is_file()
+
+
+def test_a_test_with_its_own_result_file_loads_lxml_to_read_and_validate_it(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    result = tmp_path / "pkg" / "t.xml"
+    own = '<testsuite name="s" tests="1"><testcase classname="C" name="a"/></testsuite>'
+    command = ["sh", "-c", f"printf '%s' '{own}' > {result}"]
+    names = _loaded_by(
+        runner_script, [str(result), "--package-name", "pkg", "--command", *command], env, tmp_path
+    )
+    assert "lxml.etree" in names
+    assert "filelock" not in names
+
+
+def test_the_test_finds_its_command_on_its_own_path(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    tools = tmp_path / "tools"
+    tools.mkdir()
+    tool = tools / "only-here"
+    tool.write_text("#!/bin/sh\necho found on the test PATH\n")
+    tool.chmod(0o755)
+    result = tmp_path / "pkg" / "t.xml"
+    args = [str(result), "--generate-result-on-success", "--env", f"PATH={tools}:/usr/bin:/bin"]
+    proc = run_runner(runner_script, [*args, "--command", "only-here"], env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "found on the test PATH" in proc.stdout
+
+
+def test_a_file_that_is_not_executable_is_reported_as_such(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    script = tmp_path / "not-executable"
+    script.write_text("#!/bin/sh\ntrue\n")
+    script.chmod(0o644)
+    proc = subprocess.run(
+        [str(Path(sys.executable).parent / "ros-isolated-test"), "run", "--", str(script)],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert proc.returncode == 126, proc.stdout + proc.stderr
+    assert "Permission denied" in proc.stdout + proc.stderr
+
+
+def test_the_test_gets_the_default_sigpipe(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    """Python ignores SIGPIPE; a test must not inherit that (``yes | head`` would complain)."""
+    result = tmp_path / "pkg" / "t.xml"
+    command = ["sh", "-c", "yes | head -n 1; echo done"]
+    proc = run_runner(
+        runner_script, [str(result), "--generate-result-on-success", "--command", *command], env
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Broken pipe" not in proc.stdout + proc.stderr
+    assert "y\ndone\n" in proc.stdout
+
+
+def test_descriptors_the_runner_inherited_do_not_reach_the_test(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    result = tmp_path / "pkg" / "t.xml"
+    read_fd, write_fd = os.pipe()
+    os.set_inheritable(write_fd, True)
+    try:
+        command = ["sh", "-c", f"ls /proc/$$/fd; [ ! -e /proc/$$/fd/{write_fd} ]"]
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-u",
+                runner_script,
+                str(result),
+                "--generate-result-on-success",
+                "--command",
+                *command,
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+            pass_fds=(write_fd,),
+        )
+    finally:
+        os.close(read_fd)
+        os.close(write_fd)
+    assert proc.returncode == 0, f"fd {write_fd} reached the test:\n{proc.stdout}{proc.stderr}"
+
+
+def test_a_filelock_on_an_ids_lock_file_keeps_the_coordinator_off_it(lock_dir: Path) -> None:
+    """Our lock is filelock's: whoever holds a FileLock on domain-N.lock holds N."""
+    first, second = free_ids(2)
+    coordinator = DomainCoordinator(lock_dir, (first, second))
+    with filelock.FileLock(str(lock_path(lock_dir, first)), timeout=0):
+        reservation = coordinator.try_reserve(["test"])
+        assert reservation is not None
+        try:
+            assert reservation.domain_id == second
+        finally:
+            reservation.release()
+
+
+def test_a_held_reservation_keeps_a_filelock_out(lock_dir: Path) -> None:
+    (domain_id,) = free_ids(1)
+    reservation = DomainCoordinator(lock_dir, (domain_id,)).try_reserve(["test"])
+    assert reservation is not None
+    try:
+        with pytest.raises(filelock.Timeout):
+            filelock.FileLock(str(lock_path(lock_dir, domain_id)), timeout=0).acquire()
+    finally:
+        reservation.release()
+    with filelock.FileLock(str(lock_path(lock_dir, domain_id)), timeout=0):
+        pass  # released: filelock gets it at once
