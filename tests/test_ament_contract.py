@@ -461,7 +461,11 @@ def test_unusable_output_file_still_leaves_a_result_file(
 def test_output_file_is_written_as_output_is_produced(
     runner_script: str, env: dict[str, str], tmp_path: Path
 ) -> None:
-    """The test waits (bounded) to see its own output in the file before it ends."""
+    """The test waits (bounded) to see its own output in the file before it ends.
+
+    It looks for the whole line (``grep -x``): the runner's "invoking" line quotes the
+    command, ``to-stderr`` included, and is in the file before the test starts.
+    """
     result = tmp_path / "pkg" / "t.xml"
     log = tmp_path / "logs" / "t.log"
     proc = ament(
@@ -469,7 +473,7 @@ def test_output_file_is_written_as_output_is_produced(
         result,
         sh(
             "echo first-line; echo to-stderr >&2; i=0;"
-            ' while [ $i -lt 200 ] && ! grep -q to-stderr "$1"; do sleep 0.05; i=$((i+1)); done;'
+            ' while [ $i -lt 200 ] && ! grep -qx to-stderr "$1"; do sleep 0.05; i=$((i+1)); done;'
             ' cp "$1" seen.log; echo last-line',
             str(log),
         ),

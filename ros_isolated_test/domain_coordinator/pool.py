@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import os
-import re
 from collections.abc import Mapping
 
 POOL_ENV = "ROS_ISOLATED_TEST_DOMAINS"
 DEFAULT_SPEC = "1-101"
 #: Fast DDS computes ports from the ID; from 233 up node creation kills the process.
 HIGHEST_VALID_ID = 232
-#: Plain ASCII digits only: int() would also take "1_0" and non-ASCII digits.
-_ITEM = re.compile(r"(?P<low>[0-9]+)\s*(?:-\s*(?P<high>[0-9]+))?", re.ASCII)
+
+
+def _number(text: str) -> int | None:
+    """Plain ASCII digits only: int() would also take "1_0" and non-ASCII digits."""
+    text = text.strip()
+    return int(text) if text.isascii() and text.isdigit() else None
 
 
 class PoolSpecError(ValueError):
@@ -30,13 +33,13 @@ def parse_pool(spec: str) -> tuple[int, ...]:
     if not spec.strip() or any(not item for item in items):
         raise PoolSpecError(f"empty entry in domain pool {spec!r}")
     for item in items:
-        match = _ITEM.fullmatch(item)
-        if match is None:
+        first, dash, last = item.partition("-")
+        low = _number(first)
+        high = _number(last) if dash else low
+        if low is None or high is None:
             raise PoolSpecError(
                 f"{item!r} in domain pool {spec!r} is not an ID or a range like 1-101"
             )
-        low = int(match["low"])
-        high = int(match["high"]) if match["high"] is not None else low
         if low > high:
             raise PoolSpecError(f"range {item!r} in domain pool {spec!r} runs backwards")
         if low < 1 or high > HIGHEST_VALID_ID:

@@ -34,6 +34,9 @@ from ros_isolated_test.domain_coordinator.queue import Queue
 
 #: Lock files are shared by all users: each must be able to open and flock them.
 LOCK_FILE_MODE = 0o666
+#: How often a waiting runner first in line tries for an ID, and how often the others look.
+HEAD_POLL_SECONDS = 0.05
+QUEUE_POLL_SECONDS = 0.1
 #: Errors that say the directory cannot take files at all: not an ID's problem.
 _DIRECTORY_ERRORS = frozenset({errno.ENOSPC, errno.EROFS, errno.EDQUOT})
 
@@ -317,7 +320,9 @@ class DomainCoordinator:
                 if on_wait is not None and (told == 0.0 or waited - told >= 10.0):
                     told = waited or 0.001
                     on_wait(self._waiting_message(ahead, waited, wait_timeout))
-                time.sleep(0.1 if ahead == 0 else 0.3)
+                # The head of the queue looks often (an attempt is a few lock calls);
+                # the rest only need to notice when they become the head.
+                time.sleep(HEAD_POLL_SECONDS if ahead == 0 else QUEUE_POLL_SECONDS)
 
     @contextlib.contextmanager
     def reserve(

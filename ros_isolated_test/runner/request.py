@@ -6,7 +6,6 @@ Plain classes rather than dataclasses, as everywhere on a test's path: importing
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Mapping
 from enum import Enum
@@ -36,7 +35,7 @@ def wait_timeout_from_env(environ: Mapping[str, str] | None = None) -> float:
         value = float(text)
     except ValueError:
         value = -1.0
-    if not (value >= 0 and math.isfinite(value)):
+    if not 0 <= value < float("inf"):  # NaN fails both comparisons
         raise ValueError(
             f"{WAIT_TIMEOUT_ENV}={text!r} is not a number of seconds; set e.g. 600, or unset it"
         )
