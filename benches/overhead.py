@@ -1,9 +1,10 @@
 """1. Per-test overhead: what wrapping a test that does nothing costs, ours against upstream.
 
 Every ctest test pays this once, so it is the floor of any suite's cost. The wall time
-is split into interpreter start-up (``python -u -c pass`` in the same venv, which no
-runner can avoid) and the runner's own work; an in-process timer splits the latter into
-imports and the run itself, and ``-X importtime`` names the imports that cost the most.
+is split into interpreter start-up (an interpreter in the same venv that starts and
+exits at once, ``os._exit``: what no runner can avoid) and the runner's own work; an
+in-process timer shows imports and the run itself, and ``-X importtime`` names the
+imports that cost the most.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ OWN_WORK_TARGET = 0.020
 
 #: Runs a runner script by path after importing what it imports, timing both parts.
 _PROBE = r"""
-import runpy, sys, time
+import os, runpy, sys, time
 kind, script, timing = sys.argv[1:4]
 # Before the imports: ament_cmake_test.main's default argv is bound when it is imported.
 sys.argv = [script, *sys.argv[4:]]
@@ -44,6 +45,16 @@ else:
     import ament_cmake_test, domain_coordinator
 t1 = time.perf_counter()
 code = 0
+real_exit = os._exit
+
+
+def _exit(status):
+    # Our script ends with os._exit (no teardown): a SystemExit here, so the timer can
+    # write first; the probe then ends as the script would.
+    raise SystemExit(status)
+
+
+os._exit = _exit
 try:
     runpy.run_path(script, run_name="__main__")
 except SystemExit as stop:
@@ -51,6 +62,9 @@ except SystemExit as stop:
 t2 = time.perf_counter()
 with open(timing, "w") as handle:
     handle.write(f"{t1 - t0} {t2 - t1}")
+if kind == "ours":
+    sys.stdout.flush()
+    real_exit(code)
 sys.exit(code)
 """
 
@@ -169,7 +183,9 @@ def run(ctx: Context) -> Section:
     probe_reps = 3 if ctx.quick else 11
     scratch = ctx.scratch("overhead")
     env = ctx.environment()
-    startup_command = [ctx.python, "-u", "-c", "pass"]
+    # Start and exit, no teardown: ours skips it too (os._exit once all is written), so
+    # the floor is the bare start; upstream's teardown counts as its own work.
+    startup_command = [ctx.python, "-u", "-c", "import os; os._exit(0)"]
     progress(f"overhead: warming up, then {reps} interleaved no-op runs per runner")
     for runner in RUNNERS:  # warm-up: bytecode caches and the page cache
         run_timed(ctx.runner_command(runner, scratch / f"warm-{runner}.xml", NOOP), env)
@@ -206,37 +222,32 @@ def run(ctx: Context) -> Section:
         ("wall time per test (median)", ms(wall[OURS]), ms(wall[UPSTREAM]), ratio(*wall.values()))
     )
     section.rows.append(
-        ("interpreter start-up (`python -u -c pass`)", ms(startup), ms(startup), "")
+        (
+            "interpreter start-up (`python -u -c 'import os; os._exit(0)'`)",
+            ms(startup),
+            ms(startup),
+            "",
+        )
     )
     section.rows.append(
         ("the runner's own work (wall - start-up)", ms(own[OURS]), ms(own[UPSTREAM]),
          ratio(own[OURS], own[UPSTREAM]))
     )  # fmt: skip
     section.rows.append(
-        (f"... of which imports (in-process timer, median of {probe_reps})",
+        (f"probe, in-process timer: imports (median of {probe_reps})",
          ms(median(parts[OURS][0])), ms(median(parts[UPSTREAM][0])),
          ratio(median(parts[OURS][0]), median(parts[UPSTREAM][0])))
     )  # fmt: skip
     section.rows.append(
-        ("... of which the run: arguments, domain ID, `true`, result file",
+        ("probe, in-process timer: the run (arguments, domain ID, `true`, result file)",
          ms(median(parts[OURS][1])), ms(median(parts[UPSTREAM][1])),
          ratio(median(parts[OURS][1]), median(parts[UPSTREAM][1])))
     )  # fmt: skip
-    # Per probe run: its wall time less start-up, imports and run is the interpreter's
-    # exit (more modules, more to tear down) and the loading of the script.
-    rest = {
-        runner: median(
-            [
-                wall_ - startup - imports - run_
-                for imports, run_, wall_ in zip(*parts[runner], strict=True)
-            ]
-        )
-        for runner in RUNNERS
-    }
-    section.rows.append(
-        ("... and the rest: interpreter exit, loading the script",
-         ms(rest[OURS]), ms(rest[UPSTREAM]), ratio(rest[OURS], rest[UPSTREAM]))
-    )  # fmt: skip
+    section.notes.append(
+        "The two in-process rows come from separate probe runs (the script loaded through "
+        "runpy, which compiles it, inside a timer), so they need not add up to the row "
+        "above them: the wall times are the measure, the probes show where time goes."
+    )
     verdict = "met" if wall[OURS] <= wall[UPSTREAM] else "NOT met"
     own_verdict = "met" if own[OURS] < OWN_WORK_TARGET else "NOT met"
     section.notes.append(

@@ -19,12 +19,13 @@ def write_atomically(path: Path, data: bytes, mode: int = 0o644) -> None:
     The folder is created if missing. ``mode`` is set explicitly, whatever the umask.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
-    for attempt in range(100):
-        temp = path.with_name(f".{path.name}.{os.getpid()}.{attempt}.tmp")
+    for _attempt in range(100):
+        # Unpredictable: in the shared lock directory, other users could plant the name.
+        temp = path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(4).hex()}.tmp")
         try:
             fd = os.open(temp, _FLAGS, mode)
         except FileExistsError:
-            continue  # a leftover of a killed run with our PID, or another thread
+            continue
         break
     else:
         raise FileExistsError(f"no free temporary name beside {path}")

@@ -290,7 +290,7 @@ def test_holder_record_is_written_then_removed(lock_dir: Path) -> None:
         assert held.holder.pid == os.getpid()
     assert not record.exists()
     assert not list(lock_dir.glob("*.json"))
-    assert not list(lock_dir.glob(".holder-*"))
+    assert not list(lock_dir.glob(".*.tmp"))
 
 
 def test_lock_file_stays_after_release_and_is_shared(lock_dir: Path) -> None:

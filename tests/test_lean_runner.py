@@ -11,6 +11,7 @@ no inherited descriptors), and a ``filelock`` lock and our reservation exclude e
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -117,6 +118,45 @@ def test_the_test_finds_its_command_on_its_own_path(
     proc = run_runner(runner_script, [*args, "--command", "only-here"], env, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "found on the test PATH" in proc.stdout
+
+
+def test_a_match_whose_interpreter_is_missing_gives_way_to_the_next_one(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    """As execvp (and Popen) do: ENOENT from one match on PATH means try the next."""
+    broken, working = tmp_path / "broken", tmp_path / "working"
+    for folder, body in ((broken, "#!/no/such/interpreter\n"), (working, "#!/bin/sh\necho ran\n")):
+        folder.mkdir()
+        (folder / "tool").write_text(body)
+        (folder / "tool").chmod(0o755)
+    result = tmp_path / "pkg" / "t.xml"
+    path = f"PATH={broken}:{working}:/usr/bin:/bin"
+    args = [str(result), "--generate-result-on-success", "--env", path, "--command", "tool"]
+    proc = run_runner(runner_script, args, env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "ran\n" in proc.stdout
+
+
+def test_a_runner_started_with_sigchld_ignored_still_sees_the_exit_code(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    """An ignored SIGCHLD is inherited across exec; the kernel would then reap the test."""
+    result = tmp_path / "pkg" / "t.xml"
+
+    def ignore_sigchld() -> None:
+        signal.signal(signal.SIGCHLD, signal.SIG_IGN)
+
+    proc = subprocess.run(
+        [sys.executable, "-u", runner_script, str(result), "--command", "sh", "-c", "exit 3"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        preexec_fn=ignore_sigchld,
+    )
+    assert proc.returncode == 3, proc.stdout + proc.stderr
+    assert "exited with code 3" in proc.stdout
 
 
 def test_a_file_that_is_not_executable_is_reported_as_such(

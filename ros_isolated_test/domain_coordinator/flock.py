@@ -14,7 +14,7 @@ import errno
 import fcntl
 
 #: What flock says when another open file holds the lock.
-_BUSY = frozenset({errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES})
+_BUSY = frozenset({errno.EAGAIN, errno.EWOULDBLOCK})
 
 
 def try_lock(fd: int) -> bool:

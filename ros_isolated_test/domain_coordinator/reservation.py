@@ -257,8 +257,8 @@ class DomainCoordinator:
         An ID counts as free only when its lock and its TCP port can both be taken (so
         upstream's ``domain_coordinator`` on this machine is respected) and no live
         process carries it in its environment. That last check, a scan of every
-        process, runs once, while the first ID is already held: no process can take
-        that ID up after the scan, and runners that find every ID locked never pay it.
+        process, runs once, when the first ID is held (lock and port): runners that
+        find every ID taken never pay it.
         """
         ensure_lock_dir(self.lock_dir)
         squatted: set[int] | None = None

@@ -31,8 +31,13 @@ EPILOG = "Set DISABLE_ROS_ISOLATION=1 to run without a reserved domain ID."
 #: it is imported by every test's runner, and this fixed set needs none of it.
 OPTIONS: tuple[tuple[str, str | None, bool, str], ...] = (
     ("--package-name", "NAME", False, "prefix for gtest classnames, suite names"),
-    ("--env", "K=V", True, "variables to set"),
-    ("--append-env", "K=V", True, "values to append to path-like variables (set when unset)"),
+    ("--env", "K=V", True, "variables to set (repeatable)"),
+    (
+        "--append-env",
+        "K=V",
+        True,
+        "values to append to path-like variables, set when unset (repeatable)",
+    ),
     ("--output-file", "PATH", False, "also write all output to this file"),
     (
         "--generate-result-on-success",
@@ -86,19 +91,35 @@ def _option(word: str) -> tuple[str, str | None, bool]:
     return name, metavar, repeats
 
 
+def _is_option(word: str) -> bool:
+    """Whether argparse (run_test.py's parser) would take ``word`` for an option.
+
+    A negative number, a lone ``-`` or a word with a space is a value.
+    """
+    if not word.startswith("-") or word == "-" or " " in word:
+        return False
+    return not word[1:].replace(".", "", 1).isdigit()
+
+
 def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[str]]]:
-    """Positional arguments and each option's values (a flag's list holds one ``""``)."""
+    """Positional arguments and each option's values (a flag's list holds one ``""``).
+
+    Values of a repeated ``--env`` or ``--append-env`` accumulate; other options keep
+    their last value. After ``--`` every word is positional.
+    """
     positional: list[str] = []
     values: dict[str, list[str]] = {}
-    index = 0
-    while index < len(argv):
-        word = argv[index]
-        index += 1
-        if not word.startswith("--") or word == "--":
-            if word.startswith("-") and word != "-":
-                raise UsageError(f"unrecognized arguments: {word}")
+    words = list(argv)
+    while words:
+        word = words.pop(0)
+        if word == "--":
+            positional += words
+            break
+        if not _is_option(word):
             positional.append(word)
             continue
+        if not word.startswith("--"):
+            raise UsageError(f"unrecognized arguments: {word}")
         word, equals, inline = word.partition("=")
         name, metavar, repeats = _option(word)
         if metavar is None:
@@ -107,9 +128,10 @@ def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[str]]
             values[name] = [""]
             continue
         taken = [inline] if equals else []
-        while index < len(argv) and not argv[index].startswith("-") and (repeats or not taken):
-            taken.append(argv[index])
-            index += 1
+        while not equals and words and not _is_option(words[0]) and words[0] != "--":
+            taken.append(words.pop(0))
+            if not repeats:
+                break
         if not taken:
             count = "at least one argument" if repeats else "one argument"
             raise UsageError(f"argument {name}: expected {count}")

@@ -29,9 +29,9 @@ def become_subreaper() -> bool:
 
 
 def reap_orphans(keep: int | None = None) -> int:
-    """Reap every exited child except ``keep`` (the test, whose status Popen collects).
+    """Reap every exited child except ``keep`` (the test, whose status the supervisor collects).
 
-    Returns how many were reaped. Stops at ``keep``: its status must stay for Popen.
+    Returns how many were reaped. Stops at ``keep``: its status must stay for the supervisor.
     """
     reaped = 0
     while True:

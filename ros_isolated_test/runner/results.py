@@ -73,16 +73,17 @@ def render(suite: Suite, validate: bool = True) -> Rendered:
     that of the suite written, so a result replaced by the internal error case fails
     the run instead of passing it silently.
     """
-    data = xunit_writer.serialize(suite)
+    written = suite
+    data = xunit_writer.serialize(written)
     if validate:
         found = _problems_of(data)
         if found:
-            suite = _internal_error(suite, found)
-            data = xunit_writer.serialize(suite)
+            written = _internal_error(suite, found)
+            data = xunit_writer.serialize(written)
             if _problems_of(data):
-                suite = _internal_error(_bare(suite), found)
-                data = xunit_writer.serialize(suite)
-    return Rendered(data, suite.failed)
+                written = _internal_error(_bare(suite), found)
+                data = xunit_writer.serialize(written)
+    return Rendered(data, written.failed)
 
 
 def _problems_of(data: bytes) -> list[str]:

@@ -17,7 +17,7 @@ import os
 import select
 import signal
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 from ros_isolated_test.runner import process_tree, reaper
 from ros_isolated_test.runner.capture import OutputCapture
@@ -132,27 +132,16 @@ class _Test:
 
     Started with ``posix_spawn``, not ``subprocess``: the one call the runner needs
     does not pay for importing subprocess (and threading, selectors) on every test.
+    It is started as Popen would start it: found on the test's own PATH, with
+    SIGPIPE at its default, without the runner's other descriptors.
     """
 
     def __init__(self, command: Sequence[str], env: Mapping[str, str]) -> None:
-        read_fd, write_fd = (_above_stdio(fd) for fd in os.pipe())
+        read_fd, write_fd = os.pipe()
         try:
-            _close_inherited_on_exec()
-            executable = _executable(command[0], env)
-            try:
-                self.pid = os.posix_spawn(
-                    executable,
-                    list(command),
-                    dict(env),
-                    file_actions=[
-                        (os.POSIX_SPAWN_DUP2, write_fd, 1),
-                        (os.POSIX_SPAWN_DUP2, write_fd, 2),
-                    ],
-                    setsigdef=_DEFAULT_IN_TEST,
-                )
-            except OSError as error:
-                # Name the command as given, not the path it was found at.
-                raise type(error)(error.errno, error.strerror, command[0]) from None
+            read_fd, write_fd = _above_stdio(read_fd), _above_stdio(write_fd)
+            with _inherited_fds_closed_on_exec():
+                self.pid = _spawn(command, env, write_fd)
         except BaseException:
             os.close(read_fd)
             raise
@@ -167,21 +156,24 @@ class _Test:
             try:
                 pid, status = os.waitpid(self.pid, os.WNOHANG)
             except ChildProcessError:
-                return None
+                # Reaped elsewhere (SIGCHLD ignored in an embedding thread): the status
+                # is lost; like Popen, call it 0 rather than wait forever.
+                self.returncode = 0
+                return 0
             if pid:
                 self.returncode = os.waitstatus_to_exitcode(status)
         return self.returncode
 
     def wait(self, timeout: float | None = None) -> int | None:
         """Wait for the exit code; None if ``timeout`` seconds pass first."""
-        if timeout is None:
-            while self.returncode is None:
-                _pid, status = os.waitpid(self.pid, 0)
-                self.returncode = os.waitstatus_to_exitcode(status)
-            return self.returncode
-        deadline = time.monotonic() + timeout
+        deadline = None if timeout is None else time.monotonic() + timeout
         delay = 0.0005
         while self.poll() is None:
+            if deadline is None:
+                with contextlib.suppress(ChildProcessError):
+                    _pid, status = os.waitpid(self.pid, 0)
+                    self.returncode = os.waitstatus_to_exitcode(status)
+                continue
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return None
@@ -190,36 +182,91 @@ class _Test:
         return self.returncode
 
 
+def _spawn(command: Sequence[str], env: Mapping[str, str], output_fd: int) -> int:
+    """Start ``command`` with ``output_fd`` as its stdout and stderr; its PID.
+
+    Each match on the test's PATH is tried in turn, as execvp does: a script whose
+    interpreter is missing (ENOENT) gives way to the next match.
+    """
+    name = command[0]
+    if os.sep in name:
+        candidates = [name]
+    else:
+        folders = os.get_exec_path(dict(env))
+        candidates = [
+            path for folder in folders if os.path.exists(path := os.path.join(folder, name))
+        ]
+    kept: OSError | None = None
+    last: OSError | None = None
+    for path in candidates:
+        try:
+            return os.posix_spawn(
+                path,
+                list(command),
+                dict(env),
+                file_actions=[
+                    (os.POSIX_SPAWN_DUP2, output_fd, 1),
+                    (os.POSIX_SPAWN_DUP2, output_fd, 2),
+                ],
+                setsigdef=_DEFAULT_IN_TEST,
+            )
+        except OSError as error:
+            # Named as given, not as found; the first error other than "missing" is kept.
+            last = type(error)(error.errno, error.strerror, name)
+            if kept is None and error.errno not in (errno.ENOENT, errno.ENOTDIR):
+                kept = last
+    raise kept or last or FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), name)
+
+
 def _above_stdio(fd: int) -> int:
     """``fd`` moved above 0-2, so it can never be one of the test's standard streams."""
     if fd > 2:
         return fd
-    moved = fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 3)
-    os.close(fd)
-    return moved
+    try:
+        return fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 3)
+    finally:
+        os.close(fd)
 
 
-def _close_inherited_on_exec() -> None:
-    """Descriptors the runner inherited (a jobserver, a parent's pipes) stay out of the test."""
+@contextlib.contextmanager
+def _inherited_fds_closed_on_exec() -> Iterator[None]:
+    """Descriptors the runner inherited (a jobserver, a parent's pipes) stay out of the test.
+
+    Marked close-on-exec for the spawn only, then put back: a program embedding the
+    runner keeps its descriptors as they were.
+    """
+    marked: list[int] = []
     with contextlib.suppress(OSError):
         for name in os.listdir("/proc/self/fd"):
-            if int(name) > 2:
-                with contextlib.suppress(OSError):
-                    os.set_inheritable(int(name), False)
+            fd = int(name)
+            with contextlib.suppress(OSError):
+                if fd > 2 and os.get_inheritable(fd):
+                    os.set_inheritable(fd, False)
+                    marked.append(fd)
+    try:
+        yield
+    finally:
+        for fd in marked:
+            with contextlib.suppress(OSError):
+                os.set_inheritable(fd, True)
 
 
-def _executable(name: str, env: Mapping[str, str]) -> str:
-    """``name`` found on the test's PATH (not the runner's), as a shell would find it."""
-    if os.sep in name:
-        return name
-    candidates = [os.path.join(folder, name) for folder in os.get_exec_path(dict(env))]
-    for path in candidates:
-        if os.path.isfile(path) and os.access(path, os.X_OK):
-            return path
-    for path in candidates:
-        if os.path.exists(path):
-            return path  # not executable: starting it gives the exact error
-    raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), name)
+@contextlib.contextmanager
+def _child_statuses_kept() -> Iterator[None]:
+    """SIGCHLD at its default while the test runs.
+
+    Ignored (a launcher may pass that on), the kernel would reap the test by itself and
+    its exit status would be lost.
+    """
+    try:
+        previous = signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+    except ValueError:  # not the main thread: the embedding program decides
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGCHLD, previous)
 
 
 def _from_terminal() -> bool:
@@ -241,7 +288,7 @@ def run(
     reaper.become_subreaper()
     start = time.monotonic()
     # Handlers before the test exists: a signal arriving as it starts must reach it too.
-    with _Signals() as signals:
+    with _child_statuses_kept(), _Signals() as signals:
         try:
             test = _Test(command, env)
         except OSError as error:

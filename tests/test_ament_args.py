@@ -1,0 +1,117 @@
+"""run_test.py's arguments, parsed without argparse: the words argparse would accept, read alike."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ros_isolated_test.runner.ament_args import UsageError, help_text, parse
+
+
+def _env(argv: list[str]) -> list[tuple[str, str, bool]]:
+    return [(item.name, item.value, item.append) for item in parse(argv).env]
+
+
+def test_the_full_ament_argument_set() -> None:
+    request = parse(
+        [
+            "build/pkg/test_results/pkg/t.xunit.xml",
+            "--package-name",
+            "pkg",
+            "--output-file",
+            "build/pkg/ament_cmake_pytest/t.txt",
+            "--env",
+            "A=1",
+            "B=x=y",
+            "--append-env",
+            "PATH=/opt/bin",
+            "--generate-result-on-success",
+            "--skip-return-code",
+            "77",
+            "--command",
+            "pytest",
+            "--env",
+            "-x",
+        ]
+    )
+    assert request.result_file == Path("build/pkg/test_results/pkg/t.xunit.xml")
+    assert request.package_name == "pkg"
+    assert request.output_file == Path("build/pkg/ament_cmake_pytest/t.txt")
+    assert [(e.name, e.value, e.append) for e in request.env] == [
+        ("A", "1", False),
+        ("B", "x=y", False),
+        ("PATH", "/opt/bin", True),
+    ]
+    assert request.generate_result_on_success
+    assert not request.skip_test
+    assert request.skip_return_code == 77
+    assert request.command == ("pytest", "--env", "-x")
+
+
+def test_values_that_look_like_negative_numbers_or_hold_spaces_are_values() -> None:
+    """CMake splits ``A=1;-5`` into two words; argparse keeps ``-5`` as a value."""
+    assert _env(["r.xml", "--env", "A=1", "-5", "--command", "x"]) == [("A", "1;-5", False)]
+    assert _env(["r.xml", "--env", "A=1", "-x y", "--command", "x"]) == [("A", "1;-x y", False)]
+    assert parse(["r.xml", "--output-file", "-", "--command", "x"]).output_file == Path("-")
+
+
+def test_repeated_env_options_accumulate() -> None:
+    argv = ["r.xml", "--env", "A=1", "--env", "B=2", "--append-env", "P=/x", "--command", "x"]
+    assert _env(argv) == [("A", "1", False), ("B", "2", False), ("P", "/x", True)]
+
+
+def test_option_equals_value_and_unique_prefixes() -> None:
+    request = parse(["r.xml", "--pack=p", "--gen", "--env=A=1", "--command", "x"])
+    assert request.package_name == "p"
+    assert request.generate_result_on_success
+    assert _env(["r.xml", "--env=A=1", "--command", "x"]) == [("A", "1", False)]
+
+
+def test_double_dash_ends_the_options() -> None:
+    assert parse(["--", "r.xml", "--command", "x"]).result_file == Path("r.xml")
+
+
+@pytest.mark.parametrize(
+    ("argv", "says", "result_file"),
+    [
+        (["--command", "x"], "required: result_file", None),
+        (["r.xml", "extra", "--command", "x"], "unrecognized arguments: extra", "r.xml"),
+        (["r.xml", "-q", "--command", "x"], "unrecognized arguments: -q", "r.xml"),
+        (["r.xml", "--nope", "--command", "x"], "unrecognized arguments: --nope", "r.xml"),
+        (["r.xml", "--skip", "--command", "x"], "ambiguous option: --skip", "r.xml"),
+        (["r.xml", "--package-name", "--command", "x"], "expected one argument", "r.xml"),
+        (["r.xml", "--env", "--command", "x"], "expected at least one argument", "r.xml"),
+        (["r.xml", "--skip-test=yes", "--command", "x"], "ignored explicit argument", "r.xml"),
+        (["r.xml", "--skip-return-code", "256", "--command", "x"], "0 to 255", "r.xml"),
+        (["r.xml", "--skip-return-code", "x", "--command", "x"], "0 to 255", "r.xml"),
+        (["r.xml", "--env", "=1", "--command", "x"], "no variable name", "r.xml"),
+        (["r.xml", "--env", "novalue", "--command", "x"], "contains no '='", "r.xml"),
+        (["r.xml", "--package-name", "p"], "no test command", "r.xml"),
+        (["r.xml", "--command"], "no test command", "r.xml"),
+    ],
+)
+def test_usage_errors_name_the_problem_and_keep_the_result_file(
+    argv: list[str], says: str, result_file: str | None
+) -> None:
+    with pytest.raises(UsageError) as raised:
+        parse(argv)
+    assert says in str(raised.value)
+    assert raised.value.result_file == (Path(result_file) if result_file else None)
+
+
+def test_help_lists_every_option() -> None:
+    text = help_text()
+    assert text.startswith("usage: run_test_isolated.py result_file")
+    for option in (
+        "--package-name NAME",
+        "--env K=V [K=V ...]",
+        "--append-env K=V [K=V ...]",
+        "--output-file PATH",
+        "--generate-result-on-success",
+        "--skip-test",
+        "--skip-return-code N",
+        "--command CMD ...",
+        "DISABLE_ROS_ISOLATION",
+    ):
+        assert option in text
