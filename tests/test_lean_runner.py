@@ -10,6 +10,7 @@ no inherited descriptors), and a ``filelock`` lock and our reservation exclude e
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import subprocess
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import filelock
 import pytest
-from conftest import run_runner
+from conftest import run_cli, run_runner
 from test_domain_coordinator import free_ids
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
@@ -41,10 +42,10 @@ HEAVY = (
 )
 
 
-def _loaded_by(runner_script: str, args: list[str], env: dict[str, str], cwd: Path) -> set[str]:
-    """Top-level names of the modules a runner process imported (``-X importtime``)."""
+def _imported(argv: list[str], env: dict[str, str], cwd: Path | None = None) -> set[str]:
+    """The modules ``python -X importtime ARGV`` imported, by their full names."""
     proc = subprocess.run(
-        [sys.executable, "-X", "importtime", "-u", runner_script, *args],
+        [sys.executable, "-X", "importtime", *argv],
         env=env,
         cwd=cwd,
         capture_output=True,
@@ -53,28 +54,21 @@ def _loaded_by(runner_script: str, args: list[str], env: dict[str, str], cwd: Pa
         check=False,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    names = set()
-    for line in proc.stderr.splitlines():
-        if line.startswith("import time:") and "|" in line:
-            names.add(line.rsplit("|", 1)[1].strip())
-    assert names, proc.stderr
-    return names
-
-
-def _baseline(env: dict[str, str]) -> set[str]:
-    proc = subprocess.run(
-        [sys.executable, "-X", "importtime", "-c", "pass"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=True,
-    )
-    return {
+    names = {
         line.rsplit("|", 1)[1].strip()
         for line in proc.stderr.splitlines()
         if line.startswith("import time:") and "|" in line
     }
+    assert names, proc.stderr
+    return names
+
+
+def _loaded_by(runner_script: str, args: list[str], env: dict[str, str], cwd: Path) -> set[str]:
+    return _imported(["-u", runner_script, *args], env, cwd)
+
+
+def _baseline(env: dict[str, str]) -> set[str]:
+    return _imported(["-c", "pass"], env)
 
 
 def _heavy(names: set[str], baseline: set[str]) -> list[str]:
@@ -142,19 +136,9 @@ def test_a_runner_started_with_sigchld_ignored_still_sees_the_exit_code(
 ) -> None:
     """An ignored SIGCHLD is inherited across exec; the kernel would then reap the test."""
     result = tmp_path / "pkg" / "t.xml"
-
-    def ignore_sigchld() -> None:
-        signal.signal(signal.SIGCHLD, signal.SIG_IGN)
-
-    proc = subprocess.run(
-        [sys.executable, "-u", runner_script, str(result), "--command", "sh", "-c", "exit 3"],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        preexec_fn=ignore_sigchld,
-    )
+    args = [str(result), "--command", "sh", "-c", "exit 3"]
+    ignore = functools.partial(signal.signal, signal.SIGCHLD, signal.SIG_IGN)
+    proc = run_runner(runner_script, args, env, preexec_fn=ignore)
     assert proc.returncode == 3, proc.stdout + proc.stderr
     assert "exited with code 3" in proc.stdout
 
@@ -165,15 +149,7 @@ def test_a_file_that_is_not_executable_is_reported_as_such(
     script = tmp_path / "not-executable"
     script.write_text("#!/bin/sh\ntrue\n")
     script.chmod(0o644)
-    proc = subprocess.run(
-        [str(Path(sys.executable).parent / "ros-isolated-test"), "run", "--", str(script)],
-        env=env,
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+    proc = run_cli(["run", "--", str(script)], env, cwd=tmp_path)
     assert proc.returncode == 126, proc.stdout + proc.stderr
     assert "Permission denied" in proc.stdout + proc.stderr
 
@@ -184,9 +160,8 @@ def test_the_test_gets_the_default_sigpipe(
     """Python ignores SIGPIPE; a test must not inherit that (``yes | head`` would complain)."""
     result = tmp_path / "pkg" / "t.xml"
     command = ["sh", "-c", "yes | head -n 1; echo done"]
-    proc = run_runner(
-        runner_script, [str(result), "--generate-result-on-success", "--command", *command], env
-    )
+    args = [str(result), "--generate-result-on-success", "--command", *command]
+    proc = run_runner(runner_script, args, env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Broken pipe" not in proc.stdout + proc.stderr
     assert "y\ndone\n" in proc.stdout
@@ -197,26 +172,10 @@ def test_descriptors_the_runner_inherited_do_not_reach_the_test(
 ) -> None:
     result = tmp_path / "pkg" / "t.xml"
     read_fd, write_fd = os.pipe()
-    os.set_inheritable(write_fd, True)
     try:
         command = ["sh", "-c", f"ls /proc/$$/fd; [ ! -e /proc/$$/fd/{write_fd} ]"]
-        proc = subprocess.run(
-            [
-                sys.executable,
-                "-u",
-                runner_script,
-                str(result),
-                "--generate-result-on-success",
-                "--command",
-                *command,
-            ],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-            pass_fds=(write_fd,),
-        )
+        args = [str(result), "--generate-result-on-success", "--command", *command]
+        proc = run_runner(runner_script, args, env, pass_fds=(write_fd,))
     finally:
         os.close(read_fd)
         os.close(write_fd)
