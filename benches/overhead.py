@@ -64,7 +64,7 @@ with open(timing, "w") as handle:
     handle.write(f"{t1 - t0} {t2 - t1}")
 if kind == "ours":
     sys.stdout.flush()
-    real_exit(code)
+    real_exit(code if isinstance(code, int) else 1)
 sys.exit(code)
 """
 

@@ -61,6 +61,18 @@ def test_repeated_env_options_accumulate() -> None:
     assert _env(argv) == [("A", "1", False), ("B", "2", False), ("P", "/x", True)]
 
 
+def test_a_continuation_never_crosses_into_another_env_option() -> None:
+    """CMake's ``;`` splits are rejoined within one ``--env`` only, as run_test.py does."""
+    with pytest.raises(UsageError, match="contains no '='"):
+        parse(["r.xml", "--env", "A=x", "--env", "junk", "--command", "x"])
+
+
+def test_an_option_with_an_inline_value_holding_a_space() -> None:
+    request = parse(["r.xml", "--output-file=/tmp/my dir/o.txt", "--env=A=a b", "--command", "x"])
+    assert request.output_file == Path("/tmp/my dir/o.txt")
+    assert _env(["r.xml", "--env=A=a b", "--command", "x"]) == [("A", "a b", False)]
+
+
 def test_option_equals_value_and_unique_prefixes() -> None:
     request = parse(["r.xml", "--pack=p", "--gen", "--env=A=1", "--command", "x"])
     assert request.package_name == "p"

@@ -11,10 +11,12 @@ no inherited descriptors), and a ``filelock`` lock and our reservation exclude e
 from __future__ import annotations
 
 import functools
+import io
 import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import filelock
@@ -24,6 +26,8 @@ from test_domain_coordinator import free_ids
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
 from ros_isolated_test.domain_coordinator.reservation import lock_path
+from ros_isolated_test.runner import supervisor
+from ros_isolated_test.runner.capture import OutputCapture
 
 #: Modules the common path must not load: each costs more than a millisecond.
 HEAVY = (
@@ -141,6 +145,26 @@ def test_a_runner_started_with_sigchld_ignored_still_sees_the_exit_code(
     proc = run_runner(runner_script, args, env, preexec_fn=ignore)
     assert proc.returncode == 3, proc.stdout + proc.stderr
     assert "exited with code 3" in proc.stdout
+
+
+def test_a_status_reaped_elsewhere_is_a_failure_never_a_pass() -> None:
+    """Off the main thread SIGCHLD cannot be reset: an ignored one loses the status."""
+    console = io.BytesIO()
+    outcomes: list[supervisor.Outcome] = []
+
+    def run() -> None:
+        outcomes.append(supervisor.run(["true"], dict(os.environ), OutputCapture(console)))
+
+    previous = signal.signal(signal.SIGCHLD, signal.SIG_IGN)
+    try:
+        thread = threading.Thread(target=run)
+        thread.start()
+        thread.join(60)
+    finally:
+        signal.signal(signal.SIGCHLD, previous)
+    assert outcomes, "the supervisor did not return"
+    assert outcomes[0].returncode == supervisor.STATUS_LOST
+    assert b"exit status was lost" in console.getvalue()
 
 
 def test_a_file_that_is_not_executable_is_reported_as_such(

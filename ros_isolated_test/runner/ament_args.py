@@ -96,19 +96,23 @@ def _is_option(word: str) -> bool:
 
     A negative number, a lone ``-`` or a word with a space is a value.
     """
-    if not word.startswith("-") or word == "-" or " " in word:
+    if not word.startswith("-") or word == "-":
         return False
-    return not word[1:].replace(".", "", 1).isdigit()
+    name, equals, _value = word.partition("=")
+    if equals and any(option[0].startswith(name) for option in OPTIONS):
+        return True  # --output-file=/a b: an option, whatever its value holds
+    return " " not in word and not word[1:].replace(".", "", 1).isdigit()
 
 
-def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[str]]]:
-    """Positional arguments and each option's values (a flag's list holds one ``""``).
+def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[list[str]]]]:
+    """Positional arguments and each option's values, one list per occurrence.
 
-    Values of a repeated ``--env`` or ``--append-env`` accumulate; other options keep
-    their last value. After ``--`` every word is positional.
+    A flag's occurrence holds one ``""``. Every occurrence of ``--env`` and
+    ``--append-env`` counts; other options keep their last. After ``--`` every word is
+    positional.
     """
     positional: list[str] = []
-    values: dict[str, list[str]] = {}
+    values: dict[str, list[list[str]]] = {}
     words = list(argv)
     while words:
         word = words.pop(0)
@@ -125,7 +129,7 @@ def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[str]]
         if metavar is None:
             if equals:
                 raise UsageError(f"argument {name}: ignored explicit argument {inline!r}")
-            values[name] = [""]
+            values[name] = [[""]]
             continue
         taken = [inline] if equals else []
         while not equals and words and not _is_option(words[0]) and words[0] != "--":
@@ -135,7 +139,7 @@ def _parse_options(argv: Sequence[str]) -> tuple[list[str], dict[str, list[str]]
         if not taken:
             count = "at least one argument" if repeats else "one argument"
             raise UsageError(f"argument {name}: expected {count}")
-        values[name] = [*values.get(name, []), *taken] if repeats else taken
+        values[name] = [*values.get(name, []), taken] if repeats else [taken]
     return positional, values
 
 
@@ -197,9 +201,13 @@ def parse(argv: Sequence[str]) -> RunRequest:
             "no test command: pass it after --command (it must come last)", result_file
         )
     try:
-        skip_code = values.get("--skip-return-code")
-        env = _assignments(values.get("--env", []), "--env", append=False)
-        env += _assignments(values.get("--append-env", []), "--append-env", append=True)
+        env = [
+            assignment
+            for option, append in (("--env", False), ("--append-env", True))
+            for occurrence in values.get(option, [])
+            for assignment in _assignments(occurrence, option, append)
+        ]
+        single = {name: found[-1][0] for name, found in values.items()}
         wait_timeout = wait_timeout_from_env()
         override = os.environ.get(discovery.OVERRIDE_ENV, "").strip() or None
         return RunRequest(
@@ -208,12 +216,16 @@ def parse(argv: Sequence[str]) -> RunRequest:
             wait_timeout=wait_timeout,
             discovery_range=override,
             result_file=result_file,
-            package_name=values.get("--package-name", [None])[0],
-            output_file=Path(values["--output-file"][0]) if "--output-file" in values else None,
+            package_name=single.get("--package-name"),
+            output_file=Path(single["--output-file"]) if "--output-file" in single else None,
             env=tuple(env),
-            skip_test="--skip-test" in values,
-            skip_return_code=_return_code(skip_code[0]) if skip_code else None,
-            generate_result_on_success="--generate-result-on-success" in values,
+            skip_test="--skip-test" in single,
+            skip_return_code=(
+                _return_code(single["--skip-return-code"])
+                if "--skip-return-code" in single
+                else None
+            ),
+            generate_result_on_success="--generate-result-on-success" in single,
             env_origin="--env (ament_add_test ENV)",
         )
     except (UsageError, ValueError) as error:

@@ -36,6 +36,8 @@ DRAIN_LIMIT_SECONDS = 1.0
 POLL_SECONDS = 0.2
 #: Signals that end a run: passed on to the test, then the same cleanup as a timeout.
 FORWARDED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: The exit code a test gets when its status was reaped by someone else: a failure.
+STATUS_LOST = 255
 #: Reset to their default in the test: Python ignores SIGPIPE, and so would the test.
 _DEFAULT_IN_TEST = (signal.SIGPIPE, signal.SIGXFSZ)
 
@@ -137,9 +139,8 @@ class _Test:
     """
 
     def __init__(self, command: Sequence[str], env: Mapping[str, str]) -> None:
-        read_fd, write_fd = os.pipe()
+        read_fd, write_fd = _pipe_above_stdio()
         try:
-            read_fd, write_fd = _above_stdio(read_fd), _above_stdio(write_fd)
             with _inherited_fds_closed_on_exec():
                 self.pid = _spawn(command, env, write_fd)
         except BaseException:
@@ -149,6 +150,8 @@ class _Test:
             os.close(write_fd)
         self.stdout = read_fd
         self.returncode: int | None = None
+        #: The status was reaped elsewhere (SIGCHLD ignored in an embedding thread).
+        self.status_lost = False
 
     def poll(self) -> int | None:
         """The exit code (negative: killed by that signal), or None while it runs."""
@@ -156,10 +159,10 @@ class _Test:
             try:
                 pid, status = os.waitpid(self.pid, os.WNOHANG)
             except ChildProcessError:
-                # Reaped elsewhere (SIGCHLD ignored in an embedding thread): the status
-                # is lost; like Popen, call it 0 rather than wait forever.
-                self.returncode = 0
-                return 0
+                # Reaped elsewhere: never wait forever, and never call it a pass.
+                self.status_lost = True
+                self.returncode = STATUS_LOST
+                return STATUS_LOST
             if pid:
                 self.returncode = os.waitstatus_to_exitcode(status)
         return self.returncode
@@ -218,14 +221,23 @@ def _spawn(command: Sequence[str], env: Mapping[str, str], output_fd: int) -> in
     raise kept or last or FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), name)
 
 
-def _above_stdio(fd: int) -> int:
-    """``fd`` moved above 0-2, so it can never be one of the test's standard streams."""
-    if fd > 2:
-        return fd
+def _pipe_above_stdio() -> tuple[int, int]:
+    """A pipe whose ends are above 0-2: never one of the test's standard streams.
+
+    A runner started with stdin, stdout or stderr closed gets the lowest numbers.
+    """
+    ends = list(os.pipe())
     try:
-        return fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 3)
-    finally:
-        os.close(fd)
+        for index, fd in enumerate(ends):
+            if fd <= 2:
+                ends[index] = fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 3)
+                os.close(fd)
+    except BaseException:
+        for fd in set(ends):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        raise
+    return ends[0], ends[1]
 
 
 @contextlib.contextmanager
@@ -308,6 +320,11 @@ def run(
             returncode = test.wait()
             leftovers = _end_leftovers(kill_grace)
             _drain(test, capture)
+            if test.status_lost:
+                capture.note(
+                    f"the test's exit status was lost (reaped elsewhere: SIGCHLD ignored?);"
+                    f" counted as exit code {STATUS_LOST}"
+                )
         finally:
             os.close(test.stdout)
     assert returncode is not None
