@@ -22,6 +22,7 @@ from pathlib import Path
 import filelock
 import pytest
 from conftest import run_cli, run_runner
+from test_ament_contract import ament
 from test_domain_coordinator import free_ids
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
@@ -103,17 +104,21 @@ def test_a_test_with_its_own_result_file_loads_lxml_to_read_and_validate_it(
     assert "filelock" not in names
 
 
+def _tool(folder: Path, body: str) -> None:
+    """An executable named ``tool`` in ``folder``."""
+    folder.mkdir()
+    (folder / "tool").write_text(body)
+    (folder / "tool").chmod(0o755)
+
+
 def test_the_test_finds_its_command_on_its_own_path(
     runner_script: str, env: dict[str, str], tmp_path: Path
 ) -> None:
-    tools = tmp_path / "tools"
-    tools.mkdir()
-    tool = tools / "only-here"
-    tool.write_text("#!/bin/sh\necho found on the test PATH\n")
-    tool.chmod(0o755)
+    _tool(tmp_path / "tools", "#!/bin/sh\necho found on the test PATH\n")
+    path = f"PATH={tmp_path / 'tools'}:/usr/bin:/bin"
     result = tmp_path / "pkg" / "t.xml"
-    args = [str(result), "--generate-result-on-success", "--env", f"PATH={tools}:/usr/bin:/bin"]
-    proc = run_runner(runner_script, [*args, "--command", "only-here"], env, cwd=tmp_path)
+    options = ("--generate-result-on-success", "--env", path)
+    proc = ament(runner_script, result, ["tool"], env, *options, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "found on the test PATH" in proc.stdout
 
@@ -122,15 +127,12 @@ def test_a_match_whose_interpreter_is_missing_gives_way_to_the_next_one(
     runner_script: str, env: dict[str, str], tmp_path: Path
 ) -> None:
     """As execvp (and Popen) do: ENOENT from one match on PATH means try the next."""
-    broken, working = tmp_path / "broken", tmp_path / "working"
-    for folder, body in ((broken, "#!/no/such/interpreter\n"), (working, "#!/bin/sh\necho ran\n")):
-        folder.mkdir()
-        (folder / "tool").write_text(body)
-        (folder / "tool").chmod(0o755)
+    _tool(tmp_path / "broken", "#!/no/such/interpreter\n")
+    _tool(tmp_path / "working", "#!/bin/sh\necho ran\n")
+    path = f"PATH={tmp_path / 'broken'}:{tmp_path / 'working'}:/usr/bin:/bin"
     result = tmp_path / "pkg" / "t.xml"
-    path = f"PATH={broken}:{working}:/usr/bin:/bin"
-    args = [str(result), "--generate-result-on-success", "--env", path, "--command", "tool"]
-    proc = run_runner(runner_script, args, env, cwd=tmp_path)
+    options = ("--generate-result-on-success", "--env", path)
+    proc = ament(runner_script, result, ["tool"], env, *options, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "ran\n" in proc.stdout
 
