@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -82,3 +84,17 @@ def run_runner(
         timeout=120,
         **kwargs,
     )
+
+
+def crosstalk_workspace() -> ModuleType:
+    """``examples/crosstalk_workspace.py`` (examples/ is no package), loaded once by path."""
+    loaded = sys.modules.get("crosstalk_workspace")
+    if loaded is not None:
+        return loaded
+    path = REPO / "examples" / "crosstalk_workspace.py"
+    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while being created
+    spec.loader.exec_module(module)
+    return module

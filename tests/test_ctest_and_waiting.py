@@ -30,11 +30,10 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 from typing import TYPE_CHECKING, TypeVar
 
 import pytest
-from conftest import CLI, REPO, run_cli, run_runner
+from conftest import CLI, crosstalk_workspace, run_cli, run_runner
 from test_ament_contract import ResultSummary, load_result
 
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, POOL_ENV, port_guard, squatters
@@ -51,21 +50,7 @@ WAITING = re.compile(r"^.*waiting for a free ROS_DOMAIN_ID.*$", re.MULTILINE)
 DOMAIN_LINE = re.compile(r"Running with ROS_DOMAIN_ID (\d+)")
 
 
-def _workspace_helpers() -> ModuleType:
-    """examples/crosstalk_workspace.py, shared with test_example_package if it loaded it."""
-    loaded = sys.modules.get("crosstalk_workspace")
-    if loaded is not None:
-        return loaded
-    path = REPO / "examples" / "crosstalk_workspace.py"
-    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up while being created
-    spec.loader.exec_module(module)
-    return module
-
-
-ws = _workspace_helpers()
+ws = crosstalk_workspace()
 
 needs_colcon = pytest.mark.skipif(
     importlib.util.find_spec("rclpy") is None

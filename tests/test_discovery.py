@@ -18,11 +18,10 @@ import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 from typing import TYPE_CHECKING
 
 import pytest
-from conftest import run_cli, run_runner
+from conftest import crosstalk_workspace, run_cli, run_runner
 from test_ament_contract import ResultSummary, load_result
 
 if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path below
@@ -448,21 +447,7 @@ def test_disabled_isolation_changes_nothing_about_discovery(
 # --- the example package's parallel suite ---------------------------------------------------
 
 
-def _crosstalk_helpers() -> ModuleType:
-    """examples/crosstalk_workspace.py, shared with tests/test_example_package.py."""
-    loaded = sys.modules.get("crosstalk_workspace")
-    if loaded is not None:
-        return loaded
-    path = Path(__file__).resolve().parents[1] / "examples" / "crosstalk_workspace.py"
-    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up while being created
-    spec.loader.exec_module(module)
-    return module
-
-
-ws = _crosstalk_helpers()
+ws = crosstalk_workspace()
 
 
 @pytest.fixture(scope="module")

@@ -11,28 +11,17 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import shutil
-import sys
 from pathlib import Path
-from types import ModuleType
 from typing import TYPE_CHECKING
 
 import pytest
+from conftest import crosstalk_workspace
 
 if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path below
     from crosstalk_workspace import Record, Run
 
 
-def _load_helpers() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "examples" / "crosstalk_workspace.py"
-    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up while being created
-    spec.loader.exec_module(module)
-    return module
-
-
-ws = _load_helpers()
+ws = crosstalk_workspace()
 
 pytestmark = [
     pytest.mark.colcon,

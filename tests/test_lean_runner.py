@@ -104,34 +104,26 @@ def test_a_test_with_its_own_result_file_loads_lxml_to_read_and_validate_it(
     assert "filelock" not in names
 
 
-def _tool(folder: Path, body: str) -> None:
-    """An executable named ``tool`` in ``folder``."""
-    folder.mkdir()
-    (folder / "tool").write_text(body)
-    (folder / "tool").chmod(0o755)
-
-
-def test_the_test_finds_its_command_on_its_own_path(
-    runner_script: str, env: dict[str, str], tmp_path: Path
+@pytest.mark.parametrize(
+    "tools",
+    [
+        [("tools", "#!/bin/sh\necho ran\n")],
+        # As execvp (and Popen) do: ENOENT from one match on PATH means try the next.
+        [("broken", "#!/no/such/interpreter\n"), ("working", "#!/bin/sh\necho ran\n")],
+    ],
+    ids=["only-on-the-test-path", "missing-interpreter-then-a-working-match"],
+)
+def test_the_command_is_found_on_the_tests_own_path(
+    runner_script: str, env: dict[str, str], tmp_path: Path, tools: list[tuple[str, str]]
 ) -> None:
-    _tool(tmp_path / "tools", "#!/bin/sh\necho found on the test PATH\n")
-    path = f"PATH={tmp_path / 'tools'}:/usr/bin:/bin"
+    """The runner's PATH has none of these folders: only the test's PATH finds ``tool``."""
+    for name, body in tools:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "tool").write_text(body)
+        (tmp_path / name / "tool").chmod(0o755)
+    path = ":".join([*(str(tmp_path / name) for name, _ in tools), "/usr/bin", "/bin"])
     result = tmp_path / "pkg" / "t.xml"
-    options = ("--generate-result-on-success", "--env", path)
-    proc = ament(runner_script, result, ["tool"], env, *options, cwd=tmp_path)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "found on the test PATH" in proc.stdout
-
-
-def test_a_match_whose_interpreter_is_missing_gives_way_to_the_next_one(
-    runner_script: str, env: dict[str, str], tmp_path: Path
-) -> None:
-    """As execvp (and Popen) do: ENOENT from one match on PATH means try the next."""
-    _tool(tmp_path / "broken", "#!/no/such/interpreter\n")
-    _tool(tmp_path / "working", "#!/bin/sh\necho ran\n")
-    path = f"PATH={tmp_path / 'broken'}:{tmp_path / 'working'}:/usr/bin:/bin"
-    result = tmp_path / "pkg" / "t.xml"
-    options = ("--generate-result-on-success", "--env", path)
+    options = ("--generate-result-on-success", "--env", f"PATH={path}")
     proc = ament(runner_script, result, ["tool"], env, *options, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "ran\n" in proc.stdout
@@ -186,6 +178,11 @@ def test_the_test_gets_the_default_sigpipe(
     """Python ignores SIGPIPE; a test must not inherit that (``yes | head`` would complain)."""
     result = tmp_path / "pkg" / "t.xml"
     command = ["sh", "-c", "yes | head -n 1; echo done"]
+    # The control: started with SIGPIPE ignored, the same command does complain.
+    control = subprocess.run(
+        command, capture_output=True, text=True, timeout=60, check=False, restore_signals=False
+    )
+    assert "Broken pipe" in control.stderr, control.stderr
     args = [str(result), "--generate-result-on-success", "--command", *command]
     proc = run_runner(runner_script, args, env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -200,6 +197,8 @@ def test_descriptors_the_runner_inherited_do_not_reach_the_test(
     read_fd, write_fd = os.pipe()
     try:
         command = ["sh", "-c", f"ls /proc/$$/fd; [ ! -e /proc/$$/fd/{write_fd} ]"]
+        # The control: a process handed the descriptor does see it.
+        assert subprocess.run(command, pass_fds=(write_fd,), check=False).returncode != 0
         args = [str(result), "--generate-result-on-success", "--command", *command]
         proc = run_runner(runner_script, args, env, pass_fds=(write_fd,))
     finally:

@@ -296,6 +296,7 @@ class DomainCoordinator:
         on_wait: Callable[[str], None] | None = None,
     ) -> Reservation:
         """Reserve an ID, waiting first come, first served while the pool is full."""
+        # Refused before anything is read or written through a planted path (the queue).
         ensure_lock_dir(self.lock_dir)
         queue = Queue(self.lock_dir)
         # Queue behind earlier waiters, unless not waiting at all: then any free ID will do.

@@ -4,7 +4,7 @@
 Usage: daemon_talker.py PID_FILE TOKEN [--detach-stdio] [--linger SECONDS]
 
 The talker (fork, setsid, fork: reparented away from the test, in a session of its
-own) publishes TOKEN on TOPIC at 20 Hz until it is signalled, and writes its PID to
+own) publishes TOKEN on token_exchange.TOPIC at 20 Hz until it is signalled, and writes its PID to
 PID_FILE once its publisher exists. On SIGTERM, SIGINT or SIGHUP it keeps publishing
 for --linger seconds before it exits, as a node with slow cleanup does: a runner that
 released the ID before the talker was really gone would let the next test hear it.
@@ -20,21 +20,14 @@ import sys
 import time
 from pathlib import Path
 
-TOPIC = "/ros_isolated_test/process_tree"
-PUBLISH_PERIOD_S = 0.05
+from token_exchange import PERIOD_S, publishing
+
 MAX_LIFE_S = 120.0
 START_DEADLINE_S = 30.0
 
 
 def talk(pid_file: Path, token: str, linger: float) -> None:
-    """Runs in the daemon: rclpy is imported only here, after the forks."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-    from rclpy.signals import SignalHandlerOptions
-    from std_msgs.msg import String  # type: ignore[import-untyped]
-
+    """Runs in the daemon: rclpy is imported (by ``publishing``) only here, after the forks."""
     stop_at = time.monotonic() + MAX_LIFE_S
 
     def on_signal(signum: int, _frame: object) -> None:
@@ -43,28 +36,13 @@ def talk(pid_file: Path, token: str, linger: float) -> None:
 
     for signum in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
         signal.signal(signum, on_signal)
-    context = Context()
-    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("daemon_talker", context=context)
-    qos = QoSProfile(  # type: ignore[no-untyped-call]
-        history=HistoryPolicy.KEEP_LAST,
-        depth=50,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.VOLATILE,
-    )
-    publisher = node.create_publisher(String, TOPIC, qos)
-    node.create_timer(PUBLISH_PERIOD_S, lambda: publisher.publish(String(data=token)))
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    partial = pid_file.with_name(pid_file.name + ".partial")
-    partial.write_text(str(os.getpid()))
-    partial.rename(pid_file)
-    print(f"daemon talker {os.getpid()} publishing {token!r}", flush=True)
-    while time.monotonic() < stop_at:
-        executor.spin_once(timeout_sec=PUBLISH_PERIOD_S)
-    executor.shutdown()
-    node.destroy_node()  # type: ignore[no-untyped-call]
-    context.try_shutdown()
+    with publishing(token, "daemon_talker") as (_node, executor, _qos):
+        partial = pid_file.with_name(pid_file.name + ".partial")
+        partial.write_text(str(os.getpid()))
+        partial.rename(pid_file)
+        print(f"daemon talker {os.getpid()} publishing {token!r}", flush=True)
+        while time.monotonic() < stop_at:
+            executor.spin_once(timeout_sec=PERIOD_S)
 
 
 def main() -> int:
