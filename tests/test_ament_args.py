@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from ros_isolated_test.runner.ament_args import UsageError, help_text, parse
+from ros_isolated_test.runner.ament.args import UsageError, help_text, parse
 
 
 def _env(argv: list[str]) -> list[tuple[str, str, bool]]:

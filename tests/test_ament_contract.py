@@ -22,7 +22,7 @@ import pytest
 from conftest import run_runner
 from lxml import etree
 
-from ros_isolated_test.runner import results
+from ros_isolated_test.xunit import validate
 
 NO_RESULT = "did not generate a result file"
 DOMAIN_LINE = re.compile(r"Running with ROS_DOMAIN_ID (\d+)")
@@ -68,7 +68,7 @@ def load_result(path: Path) -> ResultSummary:
     """
     assert path.is_file(), f"no result file at {path}"
     root = etree.parse(str(path), etree.XMLParser(resolve_entities=False)).getroot()
-    assert results.problems(root) == [], f"{path} does not match schemas/junit.xsd"
+    assert validate.problems(root) == [], f"{path} does not match schemas/junit.xsd"
     assert root.tag == "testsuites", f"root is <{root.tag}>, not <testsuites>"
     suites: list[str] = []
     cases: list[CaseResult] = []

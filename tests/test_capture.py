@@ -16,8 +16,8 @@ from conftest import CLI
 from lxml import etree
 from test_ament_contract import load_result
 
-from ros_isolated_test.runner.capture import PREFIX, OutputCapture
-from ros_isolated_test.runner.xml_text import xml_safe
+from ros_isolated_test.process.capture import PREFIX, OutputCapture
+from ros_isolated_test.xunit.xml_text import xml_safe
 
 # --- end to end ------------------------------------------------------------------------------
 

@@ -16,7 +16,7 @@ from lxml import etree
 from test_ament_contract import NO_RESULT, ResultSummary, domain_of, load_result, own_result
 
 from ros_isolated_test import __version__
-from ros_isolated_test.runner import results
+from ros_isolated_test.xunit import validate
 
 ENTRIES = ("runner", "run")
 EXIT_CASE = "test process exit"
@@ -42,7 +42,7 @@ def invoke(
 def checked(path: Path) -> ResultSummary:
     """The canonical file, valid against our schema and with counts that match its cases."""
     root = etree.parse(str(path)).getroot()
-    assert results.problems(root) == []
+    assert validate.problems(root) == []
     return load_result(path)
 
 

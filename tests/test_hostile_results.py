@@ -31,9 +31,9 @@ from conftest import run_runner
 from lxml import etree
 from test_ament_contract import CaseResult, ResultSummary, load_result
 
-from ros_isolated_test.runner import results
-from ros_isolated_test.runner.junit_model import Case, Suite
-from ros_isolated_test.runner.result_file import normalise_file
+from ros_isolated_test.xunit import validate
+from ros_isolated_test.xunit.model import Case, Suite
+from ros_isolated_test.xunit.result_file import normalise_file
 
 MIB = 1024 * 1024
 GIB = 1024 * MIB
@@ -148,7 +148,7 @@ def canonical(result: Path) -> ResultSummary:
     """The canonical file at ``result``: schema-valid, counts right, summarised."""
     assert result.is_file(), f"no canonical file at {result}"
     root = etree.parse(str(result), etree.XMLParser(resolve_entities=False)).getroot()
-    assert results.problems(root) == []
+    assert validate.problems(root) == []
     return load_result(result)
 
 
@@ -778,23 +778,23 @@ def test_overlong_or_multiline_case_name_keeps_every_case(
 
 @pytest.mark.parametrize("name", ["", "  ", "t ", "a\nb"])
 def test_unusable_suite_names_are_made_usable_not_fatal(name: str) -> None:
-    rendered = results.render(
+    rendered = validate.render(
         Suite(
             name=name,
             cases=[Case("pkg.C", "a")],
             time=1.0,
-            timestamp=results.timestamp(),
+            timestamp=validate.timestamp(),
             hostname="host",
         )
     )
     root = etree.fromstring(rendered.data)
-    assert results.problems(root) == []
+    assert validate.problems(root) == []
     assert not rendered.failed
     assert [case.get("name") for case in root.iter("testcase")] == ["a"]
 
 
 def _suite(name: str, cases: list[Case]) -> Suite:
-    return Suite(name=name, cases=cases, time=1.0, timestamp=results.timestamp(), hostname="host")
+    return Suite(name=name, cases=cases, time=1.0, timestamp=validate.timestamp(), hostname="host")
 
 
 @pytest.mark.parametrize(
@@ -810,10 +810,10 @@ def _suite(name: str, cases: list[Case]) -> Suite:
 def test_schema_violation_becomes_a_valid_file_with_an_error_case(
     broken: Suite, named: str
 ) -> None:
-    rendered = results.render(broken)
+    rendered = validate.render(broken)
     assert rendered.failed, "a result replaced by the internal error must fail the run"
     root = etree.fromstring(rendered.data)
-    assert results.problems(root) == []
+    assert validate.problems(root) == []
     cases = root.findall(".//testcase")
     assert [case.get("name") for case in cases] == ["result file"]
     error = cases[0].find("error")
@@ -885,7 +885,7 @@ def test_random_bytes_never_raise_and_always_give_a_valid_file(tmp_path: Path) -
         path.write_bytes(data)
         try:
             rendered, _failed = normalise_file(path, "pkg", "t")
-            found = results.problems(etree.fromstring(rendered))
+            found = validate.problems(etree.fromstring(rendered))
         except Exception as error:
             bad.append(f"{path}: raised {error!r}")
             continue

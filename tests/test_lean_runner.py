@@ -27,8 +27,8 @@ from test_domain_coordinator import free_ids
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
 from ros_isolated_test.domain_coordinator.reservation import lock_path
-from ros_isolated_test.runner import supervisor
-from ros_isolated_test.runner.capture import OutputCapture
+from ros_isolated_test.process import supervisor
+from ros_isolated_test.process.capture import OutputCapture
 
 #: Modules the common path must not load: each costs more than a millisecond.
 HEAVY = (

@@ -22,8 +22,8 @@ from lxml import etree
 from test_ament_contract import CaseResult, ResultSummary, load_result
 
 from ros_isolated_test import __version__
-from ros_isolated_test.runner.results import problems
 from ros_isolated_test.schemas import junit_schema
+from ros_isolated_test.xunit.validate import problems
 
 SAMPLES = REPO.parent / "shared" / "reference" / "xunit-samples"
 PACKAGE = "mypkg"

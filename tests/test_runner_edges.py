@@ -9,7 +9,7 @@ from pathlib import Path
 from conftest import CLI, run_cli
 from test_ament_contract import load_result
 
-from ros_isolated_test.runner.result_file import normalise_file
+from ros_isolated_test.xunit.result_file import normalise_file
 
 
 def test_a_failing_output_file_never_ends_the_run(env: dict[str, str], tmp_path: Path) -> None:

@@ -21,7 +21,7 @@ import pytest
 from conftest import _POLICY_VARS, BIN, REPO, run_cli, run_runner
 from lxml import etree
 
-from ros_isolated_test.runner import results
+from ros_isolated_test.xunit import validate
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "reference" / "xunit-samples"
 SAMPLE_NAMES = sorted(path.name.removesuffix(".xml") for path in SAMPLES.glob("*.xml"))
@@ -257,7 +257,7 @@ def test_colcon_reads_each_canonical_file_with_reports_counts(folder: Folder, na
     base = folder.scratch / "colcon" / name
     base.mkdir(parents=True)
     shutil.copy(folder.path / f"{name}.xml", base / f"{name}.xml")
-    assert results.problems(etree.parse(str(base / f"{name}.xml")).getroot()) == []
+    assert validate.problems(etree.parse(str(base / f"{name}.xml")).getroot()) == []
     expected = folder.report[f"{name}.xml"]
     if name in RUNS:
         assert expected == RUNS[name].counts

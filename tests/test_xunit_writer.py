@@ -14,9 +14,9 @@ import pytest
 from lxml import etree
 
 from ros_isolated_test import __version__
-from ros_isolated_test.runner import results, xunit_writer
-from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
-from ros_isolated_test.runner.xml_text import TEXT_LIMIT, name_token, xml_safe
+from ros_isolated_test.xunit import serialise, validate
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
+from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
 
 _HOSTILE = [
     "",
@@ -45,7 +45,7 @@ def _suite(cases: list[Case], **kwargs: object) -> Suite:
         "name": "pkg.test",
         "cases": cases,
         "time": 1.5,
-        "timestamp": results.timestamp(),
+        "timestamp": validate.timestamp(),
         "hostname": "host",
     }
     values.update(kwargs)
@@ -74,9 +74,9 @@ def test_every_hostile_value_gives_a_valid_file_that_reads_back(
         system_out=value + " suite out",
         system_err=value + " suite err",
     )
-    data = xunit_writer.serialize(suite)
+    data = serialise.serialize(suite)
     root = _parse(data)
-    assert results.problems(root) == []
+    assert validate.problems(root) == []
     element = root.find("testsuite/testcase")
     assert element is not None
     assert element.get("classname") == name_token("pkg.C" + value, "unnamed")
@@ -98,7 +98,7 @@ def test_every_hostile_value_gives_a_valid_file_that_reads_back(
 def test_line_ends_and_tabs_survive_in_attributes_and_text() -> None:
     value = "a\tb\nc\rd\r\ne"
     case = Case.saying("pkg.C", "t", Outcome.FAILURE, value)
-    root = _parse(xunit_writer.serialize(_suite([case])))
+    root = _parse(serialise.serialize(_suite([case])))
     failure = root.find("testsuite/testcase/failure")
     assert failure is not None
     assert failure.get("message") == value
@@ -113,7 +113,7 @@ def test_counts_come_from_the_cases() -> None:
         Case.saying("pkg.C", "d", Outcome.ERROR, "e"),
         Case.saying("pkg.C", "e", Outcome.SKIPPED, "s"),
     ]
-    root = _parse(xunit_writer.serialize(_suite(cases)))
+    root = _parse(serialise.serialize(_suite(cases)))
     suite = root.find("testsuite")
     assert suite is not None
     assert [suite.get(key) for key in ("tests", "failures", "errors", "skipped")] == [
@@ -123,11 +123,11 @@ def test_counts_come_from_the_cases() -> None:
         "1",
     ]
     assert [root.get(key) for key in ("tests", "failures", "errors")] == ["5", "1", "2"]
-    assert results.problems(root) == []
+    assert validate.problems(root) == []
 
 
 def test_the_runner_version_is_always_a_property() -> None:
-    root = _parse(xunit_writer.serialize(_suite([Case("pkg.C", "a")])))
+    root = _parse(serialise.serialize(_suite([Case("pkg.C", "a")])))
     assert (
         root.find("testsuite/properties/property[@name='runner_version']").get(  # type: ignore[union-attr]
             "value"
@@ -138,14 +138,14 @@ def test_the_runner_version_is_always_a_property() -> None:
 
 def test_a_skipped_case_without_message_is_an_empty_element() -> None:
     case = Case("pkg.C", "a", outcome=Outcome.SKIPPED)
-    data = xunit_writer.serialize(_suite([case]))
+    data = serialise.serialize(_suite([case]))
     assert b'<skipped message=""/>' in data
-    assert results.problems(_parse(data)) == []
+    assert validate.problems(_parse(data)) == []
 
 
 def test_long_output_is_cut_to_the_text_limit_keeping_both_ends() -> None:
     output = "BEGIN" + "x" * (3 * TEXT_LIMIT) + "END"
-    root = _parse(xunit_writer.serialize(_suite([Case("pkg.C", "a")], system_out=output)))
+    root = _parse(serialise.serialize(_suite([Case("pkg.C", "a")], system_out=output)))
     kept = root.findtext("testsuite/system-out") or ""
     assert kept.startswith("BEGIN") and kept.endswith("END")
     assert len(kept) < TEXT_LIMIT + 200
@@ -159,7 +159,7 @@ def test_the_layout_is_lxmls_pretty_print() -> None:
         Case("pkg.C", "c", outcome=Outcome.SKIPPED, system_out="out\r\n"),
     ]
     suite = _suite(cases, properties={"command": "echo 'a b'"}, system_out="tail")
-    data = xunit_writer.serialize(suite)
+    data = serialise.serialize(suite)
     again = etree.tostring(_parse(data), xml_declaration=True, encoding="UTF-8", pretty_print=True)
     assert data == again
 
@@ -191,8 +191,8 @@ def test_random_values_always_validate() -> None:
         for index, case in enumerate(cases):
             case.name = f"{index} {case.name}"
         suite = _suite(cases, name=word(), hostname=word(), properties={word(): word()})
-        data = xunit_writer.serialize(suite)
-        found = results.problems(_parse(data))
+        data = serialise.serialize(suite)
+        found = validate.problems(_parse(data))
         if found:
             bad.append(f"{data[:300]!r}: {found[:2]}")
     assert bad == []

@@ -1,7 +1,8 @@
 """The runner: one flow from a parsed request to an exit code.
 
-CLI (``cli``, ``ament_args``) -> environment policy (``environment``) -> domain
+Entry points (``ros_isolated_test.cli``, ``ament``) build a ``request`` from settings read
+once (``settings``) -> environment policy (``environment``, ``discovery``) -> domain
 coordinator (``ros_isolated_test.domain_coordinator``) -> process supervisor
-(``supervisor``, ``capture``) -> result file (``results``) -> exit code
-(``exit_codes``). ``session.run`` is the only place that strings them together.
+(``ros_isolated_test.process``) -> result file (``ros_isolated_test.xunit``) -> exit
+code (``exit_codes``). ``session.run`` is the only place that strings them together.
 """

@@ -19,12 +19,13 @@ from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
     PoolExhaustedError,
 )
-from ros_isolated_test.runner import environment, exit_codes, supervisor
-from ros_isolated_test.runner.capture import OutputCapture
+from ros_isolated_test.process import supervisor
+from ros_isolated_test.process.capture import OutputCapture
+from ros_isolated_test.runner import environment, exit_codes
 from ros_isolated_test.runner.discovery import DiscoveryError
-from ros_isolated_test.runner.junit_model import Outcome
 from ros_isolated_test.runner.request import Mode, RunRequest
-from ros_isolated_test.runner.result_file import NO_RESULT, ResultFile
+from ros_isolated_test.xunit.model import Outcome
+from ros_isolated_test.xunit.result_file import NO_RESULT, ResultFile
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -218,7 +219,7 @@ def _conclude(
             detail = f"{NO_RESULT} {detail}"
         result.write([result.case(kind, f"{detail}\n\n{output}", duration)], duration)
         return code
-    from ros_isolated_test.runner import normaliser
+    from ros_isolated_test.xunit import normalise
 
     cases = result.adopt()
     for problem in result.problems:
@@ -228,13 +229,13 @@ def _conclude(
     )
     if abnormal or (code != 0 and not skip_code and not any(c.outcome.failed for c in cases)):
         cases.append(
-            normaliser.exit_case(
+            normalise.exit_case(
                 result.suite_name, reason, all_passed=not any(c.outcome.failed for c in cases)
             )
         )
     failed = any(case.outcome.failed for case in cases)
     output = capture.tail_text() if failed or code else ""
-    rendered = result.write(cases, duration, output, validate=True)
+    rendered = result.write(cases, duration, output, checked=True)
     if rendered is not None and rendered.failed:
         capture.note(f"the result file {result.path} reports failures or errors")
         return code or exit_codes.FAILED

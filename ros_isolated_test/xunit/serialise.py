@@ -1,4 +1,4 @@
-"""Canonical xUnit bytes from a :class:`~ros_isolated_test.runner.junit_model.Suite`.
+"""Canonical xUnit bytes from a :class:`~ros_isolated_test.xunit.model.Suite`.
 
 A serializer of one fixed shape, on the standard library only: every test's runner
 writes a result file, and loading lxml for that would cost it more than all the rest of
@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from ros_isolated_test import __version__
-from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
-from ros_isolated_test.runner.xml_text import TEXT_LIMIT, name_token, xml_safe
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
+from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
 
 DECLARATION = "<?xml version='1.0' encoding='UTF-8'?>\n"
 # Tabs and line ends in an attribute would come back as spaces (attribute-value

@@ -13,9 +13,9 @@ import os
 import stat
 import time
 
-from ros_isolated_test.runner import xunit_writer
-from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
-from ros_isolated_test.runner.xml_text import name_token
+from ros_isolated_test.xunit import serialise
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
+from ros_isolated_test.xunit.xml_text import name_token
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -74,15 +74,15 @@ def render(suite: Suite, validate: bool = True) -> Rendered:
     the run instead of passing it silently.
     """
     written = suite
-    data = xunit_writer.serialize(written)
+    data = serialise.serialize(written)
     if validate:
         found = _problems_of(data)
         if found:
             written = _internal_error(suite, found)
-            data = xunit_writer.serialize(written)
+            data = serialise.serialize(written)
             if _problems_of(data):
                 written = _internal_error(_bare(suite), found)
-                data = xunit_writer.serialize(written)
+                data = serialise.serialize(written)
     return Rendered(data, written.failed)
 
 

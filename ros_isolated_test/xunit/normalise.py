@@ -13,14 +13,14 @@ import math
 import re
 from collections.abc import Iterable
 
-from ros_isolated_test.runner.bounded_text import bounded
-from ros_isolated_test.runner.junit_model import Case, Outcome
-from ros_isolated_test.runner.xml_text import TEXT_LIMIT, name_token
-from ros_isolated_test.runner.xunit_reader import (
+from ros_isolated_test.xunit.bounded_text import bounded
+from ros_isolated_test.xunit.model import Case, Outcome
+from ros_isolated_test.xunit.reader import (
     RawCase,
     RawOutcome,
     ReadResult,
 )
+from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token
 
 _XMLRUNNER_SUFFIX = re.compile(r"-[0-9]{14}$")
 _SETUP_CLASS = re.compile(r"^(setUpClass|tearDownClass|setUpModule|tearDownModule) \((.+)\)$")

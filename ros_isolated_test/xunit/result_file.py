@@ -16,13 +16,13 @@ import time
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
-from ros_isolated_test.runner import results
-from ros_isolated_test.runner.junit_model import Case, Outcome, Suite
+from ros_isolated_test.xunit import validate
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from ros_isolated_test.runner import xunit_reader
     from ros_isolated_test.runner.request import RunRequest
+    from ros_isolated_test.xunit import reader
 
 NO_RESULT = "The test did not generate a result file."
 ORIGINAL_SUFFIX = ".orig"
@@ -76,11 +76,11 @@ class ResultFile:
         return f"{self.request.package}.{self.request.test_name}"
 
     def write(
-        self, cases: list[Case], duration: float = 0.0, output: str = "", validate: bool = False
-    ) -> results.Rendered | None:
+        self, cases: list[Case], duration: float = 0.0, output: str = "", checked: bool = False
+    ) -> validate.Rendered | None:
         """Write the canonical file holding ``cases``; None when no file was asked for.
 
-        ``validate`` when the cases came from the test's own file: the runner's own
+        ``checked`` when the cases came from the test's own file: the runner's own
         results have a fixed shape, checked against the schema by the test suite.
         """
         if self.path is None:
@@ -89,12 +89,12 @@ class ResultFile:
             name=self.suite_name,
             cases=cases,
             time=duration,
-            timestamp=results.timestamp(self.started),
-            hostname=results.hostname(),
+            timestamp=validate.timestamp(self.started),
+            hostname=validate.hostname(),
             properties=dict(self.properties),
             system_out=output,
         )
-        rendered = results.render(suite, validate)
+        rendered = validate.render(suite, checked)
         try:
             write_atomically(self.path, rendered.data)
         except OSError as error:
@@ -118,7 +118,7 @@ class ResultFile:
         """Whether the test left our placeholder (or nothing) in place."""
         if self.path is None:
             return True
-        if self.placeholder is not None and results.holds_exactly(self.path, self.placeholder):
+        if self.placeholder is not None and validate.holds_exactly(self.path, self.placeholder):
             return True
         return not os.path.lexists(self.path)
 
@@ -137,12 +137,12 @@ class ResultFile:
 
 def read_cases(
     path: Path, package: str | None, test_name: str
-) -> tuple[list[Case], xunit_reader.ReadResult]:
+) -> tuple[list[Case], reader.ReadResult]:
     """The canonical cases of any result file, and what reading it found."""
-    from ros_isolated_test.runner import normaliser, xunit_reader
+    from ros_isolated_test.xunit import normalise, reader
 
-    read = xunit_reader.read(path)
-    return normaliser.cases_from(read, package, test_name), read
+    read = reader.read(path)
+    return normalise.cases_from(read, package, test_name), read
 
 
 def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, bool]:
@@ -155,9 +155,9 @@ def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, boo
         name=f"{package}.{test_name}",
         cases=cases,
         time=sum(case.time for case in cases),
-        timestamp=results.timestamp(),
-        hostname=results.hostname(),
+        timestamp=validate.timestamp(),
+        hostname=validate.hostname(),
         properties=properties,
     )
-    rendered = results.render(suite)
+    rendered = validate.render(suite)
     return rendered.data, rendered.failed

@@ -11,9 +11,9 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ros_isolated_test.runner import normaliser, xunit_reader
-from ros_isolated_test.runner.junit_model import Case, Outcome
 from ros_isolated_test.runner.request import test_name_of
+from ros_isolated_test.xunit import normalise, reader
+from ros_isolated_test.xunit.model import Case, Outcome
 
 
 @dataclass
@@ -48,10 +48,10 @@ def result_files(paths: Iterable[Path]) -> Iterator[Path]:
 
 def report_file(path: Path) -> FileReport | None:
     """Counts for one file; None for XML that is not a test result (a ctest Test.xml)."""
-    read = xunit_reader.read(path)
+    read = reader.read(path)
     if read.root_tag is not None and not read.is_xunit:
         return None
-    cases = normaliser.cases_from(read, None, test_name_of(path))
+    cases = normalise.cases_from(read, None, test_name_of(path))
     report = FileReport(path=path, tests=len(cases))
     for case in cases:
         if case.outcome is Outcome.ERROR:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from functools import cache
 
-from ros_isolated_test.runner.bounded_text import bounded
+from ros_isolated_test.xunit.bounded_text import bounded
 
 #: Characters kept of one text (a message, a failure's text, a system-out).
 TEXT_LIMIT = 64 * 1024

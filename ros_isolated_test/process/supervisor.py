@@ -19,8 +19,8 @@ import signal
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
-from ros_isolated_test.runner import process_tree, reaper
-from ros_isolated_test.runner.capture import OutputCapture
+from ros_isolated_test.process import reaper, tree
+from ros_isolated_test.process.capture import OutputCapture
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -120,13 +120,13 @@ class _Signals:
     def _forward(self, signum: int, _frame: FrameType | None) -> None:
         if self.received is None:
             self.received, self.at = signum, time.monotonic()
-        targets = process_tree.descendants(os.getpid())
+        targets = tree.descendants(os.getpid())
         if signum == signal.SIGINT and _from_terminal():
             # The terminal already sent it to our process group: only processes that
             # left the group (setsid daemons) still need it, and only once.
             group = os.getpgrp()
             targets = [target for target in targets if target.pgid != group]
-        process_tree.signal_all(targets, signum)
+        tree.signal_all(targets, signum)
 
 
 class _Test:
@@ -308,12 +308,12 @@ def run(
         try:
             if signals.received is not None:
                 # It came while the test was being started, before it could be passed on.
-                process_tree.signal_tree(test.pid, signals.received)
+                tree.signal_tree(test.pid, signals.received)
             try:
                 timed_out = _pump(test, capture, start, timeout, kill_grace, signals)
             except BaseException:
                 # Whatever went wrong in the runner, the test must not outlive it unseen.
-                process_tree.signal_tree(test.pid, signal.SIGKILL)
+                tree.signal_tree(test.pid, signal.SIGKILL)
                 test.wait()
                 _end_leftovers(0.0)
                 raise
@@ -405,7 +405,7 @@ def _pump(
 def _signal(test: _Test, signum: int) -> None:
     """Signal the test and everything it started, while the test is still there."""
     if test.poll() is None:
-        process_tree.signal_tree(test.pid, signum)
+        tree.signal_tree(test.pid, signum)
 
 
 def _end_leftovers(grace: float) -> tuple[str, ...]:
@@ -419,20 +419,20 @@ def _end_leftovers(grace: float) -> tuple[str, ...]:
         # re-parented to us, the subreaper): none at all means nothing is left.
         return ()
     me = os.getpid()
-    leftovers = process_tree.descendants(me)
+    leftovers = tree.descendants(me)
     if not leftovers:
         reaper.reap_orphans()
         return ()
-    process_tree.signal_all(leftovers, signal.SIGTERM)
+    tree.signal_all(leftovers, signal.SIGTERM)
     deadline = time.monotonic() + grace
     while time.monotonic() < deadline:
         reaper.reap_orphans()
-        if not process_tree.descendants(me):
+        if not tree.descendants(me):
             break
         time.sleep(0.05)
     else:
-        process_tree.signal_all(process_tree.descendants(me), signal.SIGKILL)
-        while process_tree.descendants(me) and time.monotonic() < deadline + 5:
+        tree.signal_all(tree.descendants(me), signal.SIGKILL)
+        while tree.descendants(me) and time.monotonic() < deadline + 5:
             reaper.reap_orphans()
             time.sleep(0.02)
     reaper.reap_orphans()

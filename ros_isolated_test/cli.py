@@ -194,7 +194,7 @@ def runner_path() -> None:
         OUTPUT_VARIABLE RUNNER OUTPUT_STRIP_TRAILING_WHITESPACE COMMAND_ERROR_IS_FATAL ANY)
       ament_add_test(my_test RUNNER "${RUNNER}" COMMAND ...)
     """
-    script = resources.files("ros_isolated_test.runner") / "ament_script" / "run_test_isolated.py"
+    script = resources.files("ros_isolated_test.runner.ament") / "run_test_isolated.py"
     click.echo(str(Path(str(script)).resolve()))
 
 
@@ -262,7 +262,7 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
     launch_testing, unittest-xml-reporting and ctest files alike; a broken file counts
     as an error. Exits 1 when anything failed or errored.
     """
-    from ros_isolated_test.runner import report as reporting
+    from ros_isolated_test.xunit import report as reporting
 
     if not paths:
         default = Path("build")
@@ -332,7 +332,7 @@ def normalise(source: Path, output: Path | None, package_name: str, test_name: s
     through it. Exits 1 when the result reports failures or errors, like `report`.
     """
     from ros_isolated_test.atomic_file import write_atomically
-    from ros_isolated_test.runner import result_file
+    from ros_isolated_test.xunit import result_file
 
     name = test_name or test_name_of(source)
     data, failed = result_file.normalise_file(source, package_name, name)

@@ -23,9 +23,9 @@ from typing import BinaryIO, cast
 
 from lxml import etree
 
-from ros_isolated_test.runner import xml_text
-from ros_isolated_test.runner.bounded_text import BoundedText, bounded
-from ros_isolated_test.runner.xml_text import TEXT_LIMIT
+from ros_isolated_test.xunit import xml_text
+from ros_isolated_test.xunit.bounded_text import BoundedText, bounded
+from ros_isolated_test.xunit.xml_text import TEXT_LIMIT
 
 #: Read at most this much of a file; the rest is reported, not parsed.
 MAX_READ_BYTES = 256 * 1024 * 1024
