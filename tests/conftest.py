@@ -24,6 +24,28 @@ _POLICY_VARS = (
 )
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--no-skips",
+        action="store_true",
+        help="strict mode (CI): a skipped test fails, with its reason; CI has every capability",
+    )
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Iterator[None]:
+    """In strict mode a skip is a failure: CI has root, unshare and the outside tier."""
+    outcome = yield
+    report: pytest.TestReport = outcome.get_result()  # type: ignore[attr-defined]
+    if report.skipped and item.config.getoption("--no-skips") and not hasattr(report, "wasxfail"):
+        longrepr = report.longrepr
+        reason = longrepr[2] if isinstance(longrepr, tuple) else str(longrepr)
+        report.outcome = "failed"
+        report.longrepr = f"strict mode (--no-skips): this test was skipped: {reason}"
+
+
 @pytest.fixture
 def lock_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A lock directory of the test's own, so tests never contend with other runs."""

@@ -1,0 +1,187 @@
+"""Named capability markers: the only way a test of this suite may be skipped.
+
+A test skips only when the machine lacks something it needs (root, ``unshare``, a Docker
+engine, the outside tier beside the checkout), never because the product failed: a
+product error fails the test. Each marker says what is missing and how to get it, so the
+``-rs`` summary explains every skip. In strict mode (``pytest --no-skips``, which
+``.ci/run`` uses) any skip fails the run instead.
+
+Use: ``@capabilities.ROOT`` on a test, or ``pytestmark = [capabilities.UNSHARE]``; for a
+need found only at run time, ``capabilities.require(capabilities.ROOT)`` inside it.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+import os
+import shutil
+import socket
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+#: The outside tier: facts and third-party sources beside the checkout, in CI only.
+SHARED = REPO.parent / "shared"
+JENKINS_JUNIT10_XSD = SHARED / "reference" / "xunit-schemas" / "junit-10.xsd"
+LAUNCH_SOURCES = SHARED / "vendor" / "ros2-launch-jazzy"
+
+
+class Capability:
+    """Something a test needs from the machine: checked once, named in every skip."""
+
+    def __init__(self, name: str, check: Callable[[], str | None]) -> None:
+        self.name = name
+        self._check = check
+
+    @functools.cached_property
+    def missing(self) -> str | None:
+        """Why the machine lacks it (a sentence naming the fix), or None when it has it."""
+        return self._check()
+
+    @property
+    def mark(self) -> pytest.MarkDecorator:
+        """``skipif`` with the reason, for a test, a class or ``pytestmark``."""
+        return pytest.mark.skipif(
+            self.missing is not None, reason=f"[{self.name}] {self.missing}"
+        )
+
+    def __call__(self, function: Callable[..., object]) -> Callable[..., object]:
+        """Used bare as a decorator: ``@capabilities.ROOT``."""
+        return self.mark(function)  # type: ignore[no-any-return]
+
+
+def require(*needs: Capability) -> None:
+    """Skip the running test for the first missing capability (for needs found late)."""
+    for need in needs:
+        if need.missing is not None:
+            pytest.skip(f"[{need.name}] {need.missing}")
+
+
+def _root() -> str | None:
+    if os.geteuid() == 0:
+        return None
+    return "needs root (CI runs the suite as root; sudo ./scripts/test.sh does too)"
+
+
+def _run_ok(command: list[str]) -> str | None:
+    """None when ``command`` runs and exits 0, else what it said."""
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=30, check=False)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        return str(error)
+    if done.returncode != 0:
+        return (done.stderr or done.stdout).strip() or f"exit code {done.returncode}"
+    return None
+
+
+def _unshare() -> str | None:
+    if shutil.which("unshare") is None:
+        return "needs unshare(1) from util-linux (scripts/setup.sh installs it)"
+    failed = _run_ok(["unshare", "--pid", "--fork", "--mount-proc", "true"])
+    if failed is not None:
+        return f"`unshare --pid --fork --mount-proc` is not permitted here (needs root): {failed}"
+    return None
+
+
+def _mount_namespace() -> str | None:
+    if (missing := _root()) is not None:
+        return f"mounting a private file system {missing}"
+    if shutil.which("unshare") is None:
+        return "needs unshare(1) from util-linux (scripts/setup.sh installs it)"
+    failed = _run_ok(["unshare", "--mount", "--propagation", "private", "true"])
+    if failed is not None:
+        return f"cannot make a private mount namespace here: {failed}"
+    return None
+
+
+def _network_namespaces() -> str | None:
+    if (missing := _root()) is not None:
+        return f"building hosts out of network namespaces {missing}"
+    tools = [tool for tool in ("ip", "unshare") if shutil.which(tool) is None]
+    if tools:
+        return f"needs {' and '.join(tools)} (iproute2, util-linux) to build hosts"
+    return None
+
+
+def _docker() -> str | None:
+    if shutil.which("docker") is None:
+        return "needs the docker command and a running Docker engine"
+    failed = _run_ok(["docker", "info", "--format", "{{.ServerVersion}}"])
+    if failed is not None:
+        return f"needs a running Docker engine (`docker info` failed: {failed.splitlines()[0]})"
+    return None
+
+
+def _other_users() -> str | None:
+    """Children run as nobody (65534) and daemon (1), with an interpreter they may run."""
+    if (missing := _root()) is not None:
+        return f"running runners as other users {missing}"
+    import pwd
+
+    try:
+        pwd.getpwuid(65534)
+        pwd.getpwuid(1)
+    except KeyError:
+        return "needs the users nobody (65534) and daemon (1)"
+    try:
+        subprocess.run(
+            [sys.executable, "-c", "import ros_isolated_test"],
+            check=True,
+            capture_output=True,
+            user=65534,
+            group=65534,
+            extra_groups=[],
+            cwd="/",
+            timeout=60,
+        )
+    except (OSError, subprocess.SubprocessError) as error:
+        return (
+            f"user nobody cannot run this suite's Python ({sys.executable}): {error}; make the "
+            "venv from an interpreter every user can run (scripts/setup.sh prefers "
+            "/usr/bin/python3.11) and keep the checkout's path traversable"
+        )
+    return None
+
+
+def _ipv6() -> str | None:
+    try:
+        with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as probe:
+            probe.bind(("::1", 0))
+    except OSError as error:
+        return f"needs IPv6 on loopback (::1): {error.strerror}"
+    return None
+
+
+def _shared() -> str | None:
+    if SHARED.is_dir():
+        return None
+    return (
+        f"the outside tier needs {SHARED.name}/ beside the checkout (the real Jenkins "
+        "junit-10.xsd and vendored launch sources), which only the team's CI has"
+    )
+
+
+def _module(name: str) -> Callable[[], str | None]:
+    def check() -> str | None:
+        if importlib.util.find_spec(name) is not None:
+            return None
+        return f"needs the Python module {name} (scripts/setup.sh installs it into .venv)"
+
+    return check
+
+
+ROOT = Capability("root", _root)
+UNSHARE = Capability("unshare", _unshare)
+MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
+NETWORK_NAMESPACES = Capability("network-namespaces", _network_namespaces)
+DOCKER = Capability("docker", _docker)
+OTHER_USERS = Capability("other-users", _other_users)
+IPV6 = Capability("ipv6", _ipv6)
+#: The outside tier: tests that read ``../shared`` (present in CI, absent in a fresh clone).
+OUTSIDE = Capability("outside-tier", _shared)
+RCLPY = Capability("rclpy", _module("rclpy"))
