@@ -12,9 +12,9 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import CLI
+from helpers.commands import CLI
+from helpers.results import load_result
 from lxml import etree
-from test_ament_contract import load_result
 
 from ros_isolated_test.process.capture import PREFIX, OutputCapture
 from ros_isolated_test.xunit.xml_text import xml_safe
@@ -210,7 +210,7 @@ def test_capture_survives_a_console_that_went_away(tmp_path: Path) -> None:
         capture.feed(b"still ")
         capture.note("recorded")
         capture.feed(b"captured\n")
-    assert (tmp_path / "out.log").read_bytes() == f"still {PREFIX}recorded\ncaptured\n".encode()
+    assert (tmp_path / "out.log").read_bytes() == f"still \n{PREFIX}recorded\ncaptured\n".encode()
     assert capture.tail_text() == "still captured\n"
 
 

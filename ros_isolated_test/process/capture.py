@@ -1,10 +1,14 @@
 """Output capture: the test's bytes go live to the console and the output file, by chunks.
 
 Nothing but a bounded tail is kept in memory, so a test printing gigabytes costs the
-runner the same memory as one printing a line, and time stays linear.
+runner the same memory as one printing a line, and time stays linear. The output file
+gets every byte or says where it stopped and why (``file_error``): a full disk never
+truncates it silently.
 """
 
 from __future__ import annotations
+
+import contextlib
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -13,6 +17,42 @@ if TYPE_CHECKING:
 PREFIX = "-- ros-isolated-test: "
 #: Bytes of output kept for the result file: enough to see why a test failed.
 DEFAULT_TAIL_BYTES = 64 * 1024
+_NEWLINE = b"\n"
+
+
+class _Stopped(Exception):
+    """A stream took no more bytes: why, and how many of the last write it took."""
+
+    def __init__(self, reason: str, written: int) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.written = written
+
+
+def _write_all(stream: BinaryIO, data: bytes) -> None:
+    """Every byte of ``data`` or :class:`_Stopped`.
+
+    An unbuffered file (the output file is one) may take fewer bytes than given without
+    raising, as a file system filling up does: the rest is written again, and the retry
+    raises the error that stopped it (ENOSPC) or takes nothing more.
+    """
+    view = memoryview(data)
+    done = 0
+    while done < len(view):
+        try:
+            count = stream.write(view[done:])
+        except (OSError, ValueError) as error:
+            reason = getattr(error, "strerror", None) or str(error) or type(error).__name__
+            raise _Stopped(reason, done) from None
+        if not count:
+            # None (would block) or 0: no progress, so no loop that never ends.
+            raise _Stopped("the file took no more bytes", done)
+        done += count
+    try:
+        stream.flush()
+    except (OSError, ValueError) as error:
+        reason = getattr(error, "strerror", None) or str(error) or type(error).__name__
+        raise _Stopped(reason, done) from None
 
 
 class OutputCapture:
@@ -29,43 +69,77 @@ class OutputCapture:
         self._tail_limit = tail_bytes
         self._tail = bytearray()
         self.total_bytes = 0
-        #: Why the output file stopped being written, if it did.
+        #: Bytes that reached the output file.
+        self.file_bytes = 0
+        #: Why the output file stopped being written, and how many bytes it holds, if it did.
         self.file_error: str | None = None
+        # Whether the last byte each stream got ended a line: runner lines start their own.
+        self._console_at_line_start = True
+        self._file_at_line_start = True
 
     def feed(self, chunk: bytes) -> None:
         """Pass one chunk on as it arrived (no line buffering: prompts and dots show at once)."""
+        if not chunk:
+            return
         self.total_bytes += len(chunk)
-        self._emit(chunk)
+        self._to_console(chunk)
+        self._to_file(chunk)
         self._tail += chunk
         # Trim only when twice over the limit: amortised O(1) per byte.
         if len(self._tail) > 2 * self._tail_limit:
             del self._tail[: len(self._tail) - self._tail_limit]
 
     def line(self, text: str) -> None:
-        """A line of the runner's own, verbatim (``Running with ROS_DOMAIN_ID 5``)."""
-        self._emit(f"{text}\n".encode())
+        """A line of the runner's own, verbatim (``Running with ROS_DOMAIN_ID 5``).
+
+        It starts on a line of its own in each stream: after a test whose last output had
+        no newline, the stream gets one first (never the tail: the test's bytes stay its own).
+        """
+        data = f"{text}\n".encode()
+        self._to_console(data if self._console_at_line_start else _NEWLINE + data)
+        self._to_file(data if self._file_at_line_start else _NEWLINE + data)
 
     def note(self, text: str) -> None:
         """A runner message, prefixed so it stands apart from the test's output."""
         self.line(PREFIX + text)
 
-    def _emit(self, data: bytes) -> None:
+    def _to_console(self, data: bytes) -> None:
+        self._console_at_line_start = data.endswith(_NEWLINE)
+        # A closed console (a reader that went away) must not kill the test's run.
+        with contextlib.suppress(_Stopped):
+            _write_all(self._console, data)
+
+    def _to_file(self, data: bytes) -> None:
+        stream = self._file
+        if stream is None:
+            return
         try:
-            self._console.write(data)
-            self._console.flush()
-        except (OSError, ValueError):
-            # A closed console (a reader that went away) must not kill the test's run.
+            _write_all(stream, data)
+        except _Stopped as stopped:
+            self.file_bytes += stopped.written
+            self._file = None
+            self._file_failed(stream, stopped.reason)
+            return
+        self.file_bytes += len(data)
+        self._file_at_line_start = data.endswith(_NEWLINE)
+
+    def _file_failed(self, stream: BinaryIO, reason: str) -> None:
+        """Stop the copy, never the run: the console and the result file still get it all."""
+        held = self.file_bytes
+        try:
+            import os
+            import stat
+
+            status = os.fstat(stream.fileno())
+            if stat.S_ISREG(status.st_mode):
+                # What the file really holds: a buffered writer counts bytes it only kept.
+                held = status.st_size
+        except (OSError, ValueError, AttributeError):
             pass
-        if self._file is not None:
-            try:
-                self._file.write(data)
-                self._file.flush()
-            except OSError as error:
-                # A full disk or a closed pipe ends the copy, never the run: the console
-                # and the result file still get everything.
-                self._file = None
-                self.file_error = f"writing the output file failed: {error.strerror or error}"
-                self.note(f"{self.file_error}; output continues on the console only")
+        name = getattr(stream, "name", None)
+        where = f"output file {name}" if isinstance(name, str) else "the output file"
+        self.file_error = f"writing {where} failed after {held} bytes: {reason}"
+        self.note(f"{self.file_error}; the output continues on the console only")
 
     @property
     def truncated(self) -> bool:

@@ -2,7 +2,10 @@
 
 The final word is always a canonical file at the result path: the test's own file
 normalised (the original kept beside it as ``<name>.orig``), or one written for a
-test that wrote none.
+test that wrote none. When the final word cannot be written (a disk that filled up
+while the test ran), the placeholder must not stay behind saying the test most likely
+timed out: it is overwritten in place, in blocks it already holds, by a short result
+saying the write failed and how the test ended. The placeholder keeps room for that.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import time
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
-from ros_isolated_test.xunit import validate
+from ros_isolated_test.xunit import serialise, validate
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 TYPE_CHECKING = False
@@ -26,6 +29,13 @@ if TYPE_CHECKING:
 
 NO_RESULT = "The test did not generate a result file."
 ORIGINAL_SUFFIX = ".orig"
+#: How the stand-in for a result that could not be written begins.
+NOT_WRITTEN = "ros-isolated-test could not write this result file"
+#: Bytes the placeholder holds beyond its own content, so the stand-in always fits.
+RESERVE_BYTES = 1024
+#: Properties the stand-in keeps while they fit: how the test ended, and on which ID.
+_STAND_IN_PROPERTIES = ("exit", "exit_code", "signal", "duration", "ros_domain_id")
+_SPACE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 class ResultFile:
@@ -41,6 +51,10 @@ class ResultFile:
         self.problems: list[str] = []
         #: Why the result file could not be written, if it could not.
         self.write_error: str | None = None
+        # Whether adopt() moved the test's own file aside to ``original``.
+        self._adopted = False
+        # Why the last write failed, in the system's words (No space left on device).
+        self._failure = "the write failed"
 
     @property
     def original(self) -> Path | None:
@@ -75,44 +89,167 @@ class ResultFile:
         """``<package>.<test name>``: unique across a build, as CI reports need."""
         return f"{self.request.package}.{self.request.test_name}"
 
+    def _suite(
+        self, cases: list[Case], duration: float, properties: dict[str, str], output: str = ""
+    ) -> Suite:
+        return Suite(
+            name=self.suite_name,
+            cases=cases,
+            time=duration,
+            timestamp=validate.timestamp(self.started),
+            hostname=validate.hostname(),
+            properties=properties,
+            system_out=output,
+        )
+
     def write(
         self, cases: list[Case], duration: float = 0.0, output: str = "", checked: bool = False
     ) -> validate.Rendered | None:
         """Write the canonical file holding ``cases``; None when no file was asked for.
 
         ``checked`` when the cases came from the test's own file: the runner's own
-        results have a fixed shape, checked against the schema by the test suite.
+        results have a fixed shape, checked against the schema by the test suite. When
+        the write fails, ``write_error`` says why (on stderr too), and the file left
+        behind says the result could not be written rather than what the placeholder said.
         """
         if self.path is None:
             return None
-        suite = Suite(
-            name=self.suite_name,
-            cases=cases,
-            time=duration,
-            timestamp=validate.timestamp(self.started),
-            hostname=validate.hostname(),
-            properties=dict(self.properties),
-            system_out=output,
-        )
+        suite = self._suite(cases, duration, dict(self.properties), output)
         rendered = validate.render(suite, checked)
-        try:
-            write_atomically(self.path, rendered.data)
-        except OSError as error:
-            self.write_error = f"cannot write result file {self.path}: {error.strerror or error}"
-            with contextlib.suppress(OSError, ValueError):
-                print(f"ros-isolated-test: error: {self.write_error}", file=sys.stderr, flush=True)
-            return None
-        return rendered
+        if self._write(rendered.data):
+            return rendered
+        self._leave_word(cases, duration)
+        return None
 
     def write_placeholder(self) -> None:
-        """What ctest leaves behind if it kills the runner: the test did not finish."""
+        """What ctest leaves behind if it kills the runner: the test did not finish.
+
+        It ends in a comment holding ``RESERVE_BYTES`` of room: should the final write
+        fail, the stand-in overwrites it in place, in blocks already allocated.
+        """
+        if self.path is None:
+            return
         message = (
             f"{NO_RESULT} If this is all there is, the runner was killed before the test "
             "ended, as a ctest TIMEOUT does (SIGKILL, no chance to write anything else): "
             "the test most likely timed out."
         )
-        rendered = self.write([self.case(Outcome.ERROR, message)])
-        self.placeholder = rendered.data if rendered is not None else None
+        suite = self._suite([self.case(Outcome.ERROR, message)], 0.0, dict(self.properties))
+        note = "<!-- room for the runner to say what happened if it cannot replace this file"
+        padding = f"{note}{' ' * max(RESERVE_BYTES - len(note) - 5, 0)} -->\n"
+        data = serialise.serialize(suite) + padding.encode()
+        if self._write(data):
+            self.placeholder = data
+
+    def _write(self, data: bytes) -> bool:
+        assert self.path is not None
+        try:
+            write_atomically(self.path, data)
+        except OSError as error:
+            self._failure = _reason(error)
+            self.write_error = f"cannot write result file {self.path}: {self._failure}"
+            _say(f"error: {self.write_error}; {_fix(error)}")
+            return False
+        return True
+
+    def _leave_word(self, cases: list[Case], duration: float) -> None:
+        """After a failed final write: leave a file behind that says what happened.
+
+        The test's own file, if it was moved aside, goes back: its word is the best one
+        left. Else our placeholder, if still there, is overwritten by the stand-in.
+        """
+        assert self.path is not None and self.original is not None
+        if self._adopted and not os.path.lexists(self.path):
+            try:
+                os.replace(self.original, self.path)
+            except OSError as error:
+                _say(f"error: cannot put the test's own result file back: {_reason(error)}")
+                return
+            _say(f"the test's own result file is left at {self.path}, as the test wrote it")
+            return
+        if self.placeholder is None:
+            return
+        try:
+            left = self._overwrite_placeholder(cases, duration)
+        except OSError as error:
+            _say(f"error: cannot replace the placeholder at {self.path} either: {_reason(error)}")
+            return
+        if left:
+            _say(f"a result saying it could not be written is left at {self.path}")
+
+    def _overwrite_placeholder(self, cases: list[Case], duration: float) -> bool:
+        """Overwrite our placeholder where it lies (no new blocks needed); False if not ours.
+
+        Padded to the placeholder's length, so the file is valid XML even if the
+        truncation that tidies it up never happens.
+        """
+        assert self.path is not None and self.placeholder is not None
+        flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+        fd = os.open(self.path, flags)
+        try:
+            import stat
+
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                return False
+            size = len(self.placeholder)
+            if os.pread(fd, size + 1, 0) != self.placeholder:
+                return False  # the test's own file: never ours to overwrite
+            data = self._stand_in(cases, duration, size)
+            padded = data + b"\n" * (size - len(data))
+            done = 0
+            while done < size:
+                count = os.pwrite(fd, padded[done:], done)
+                if count <= 0:
+                    raise OSError(errno.EIO, "the file took no more bytes")
+                done += count
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, len(data))
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        return True
+
+    def _stand_in(self, cases: list[Case], duration: float, room: int) -> bytes:
+        """A valid result, at most ``room`` bytes, saying why and how the test ended."""
+        reason = self.write_error or self._failure
+        ended = self.properties.get("exit")
+        if ended == "not run":
+            how = "The test did not run."
+        elif ended:
+            how = f"The test {ended}."
+        else:
+            how = "How the test ended is not known."
+        failing = [case for case in cases if case.outcome.failed]
+        held = f"The result would have held {len(cases)} test case(s), {len(failing)} failed"
+        if failing:
+            held += f"; the first: {failing[0].name}: {failing[0].message}"
+        why = f"{NOT_WRITTEN} ({self._failure})"
+        message = f"{why}: this short one stands in. {how} {held}."
+        properties = {
+            key: self.properties[key] for key in _STAND_IN_PROPERTIES if key in self.properties
+        }
+        properties["result_write_error"] = reason
+
+        def render(properties: dict[str, str], length: int) -> bytes:
+            case = self.case(Outcome.ERROR, message[:length], duration)
+            case.type = "ResultNotWritten"
+            return serialise.serialize(self._suite([case], duration, properties))
+
+        for kept in (properties, {"result_write_error": reason[:200]}):
+            data = render(kept, len(message))
+            if len(data) <= room:
+                return data
+        # The longest head of the message that fits (escaping makes bytes unpredictable).
+        low, high = len(why), len(message)
+        if len(render(kept, low)) > room:
+            raise OSError(errno.ENOSPC, "no room in the placeholder for the stand-in")
+        while low < high:
+            middle = (low + high + 1) // 2
+            if len(render(kept, middle)) <= room:
+                low = middle
+            else:
+                high = middle - 1
+        return render(kept, low)
 
     def untouched(self) -> bool:
         """Whether the test left our placeholder (or nothing) in place."""
@@ -131,8 +268,26 @@ class ResultFile:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)
         if os.path.lexists(self.path):
             os.replace(self.path, self.original)
+            self._adopted = True
             self.properties["original_result_file"] = self.original.name
         return cases
+
+
+def _reason(error: OSError) -> str:
+    return error.strerror or str(error)
+
+
+def _fix(error: OSError) -> str:
+    """The fix a user can make, for the one-line error."""
+    if error.errno in _SPACE_ERRORS:
+        return "free space on its file system, or choose a result path on another one"
+    return "choose a writable file path"
+
+
+def _say(text: str) -> None:
+    """One line on stderr; a reader that went away loses nothing the exit code keeps."""
+    with contextlib.suppress(OSError, ValueError):
+        print(f"ros-isolated-test: {text}", file=sys.stderr, flush=True)
 
 
 def read_cases(
