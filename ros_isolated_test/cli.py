@@ -11,29 +11,28 @@ from pathlib import Path
 import click
 
 from ros_isolated_test import __version__
-from ros_isolated_test.domain_coordinator import (
+from ros_isolated_test.runner import session, settings
+from ros_isolated_test.runner.request import Mode, RunRequest, test_name_of
+from ros_isolated_test.runner.settings import (
+    DEFAULT_WAIT_TIMEOUT,
+    DISABLE_VAR,
+    DISCOVERY_RANGE_ENV,
     LOCK_DIR_ENV,
     POOL_ENV,
-    PoolSpecError,
-    held_domains,
-    lock_dir_from_env,
-)
-from ros_isolated_test.domain_coordinator.pool import pool_from_env
-from ros_isolated_test.runner import session
-from ros_isolated_test.runner.request import (
-    DEFAULT_WAIT_TIMEOUT,
     WAIT_TIMEOUT_ENV,
-    Mode,
-    RunRequest,
-    test_name_of,
 )
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from ros_isolated_test.domain_coordinator.status import HeldDomain
 
 EXIT_CODES_HELP = """\b
 Exit codes:
   N        the command's own exit code (0 passed)
-  128+N    the command was killed by signal N
-  1        the test's result file reports failures, or it wrote none
-  2        nothing was run: bad arguments, or ROS_DOMAIN_ID was preset
+  128+N    the command was killed by signal N, or the runner got signal N
+  1        the test's result file reports failures, or the result file or
+           --output-file could not be fully written
+  2        nothing was run: bad arguments or settings, or ROS_DOMAIN_ID was preset
   3        nothing was run: no domain ID could be reserved
   124      stopped by --timeout
   126/127  the command could not be executed / was not found
@@ -41,9 +40,11 @@ Exit codes:
 
 ENVIRONMENT_HELP = f"""\b
 Environment:
-  {POOL_ENV}   domain IDs to hand out (default 1-101, e.g. 1-50,215-232)
-  {LOCK_DIR_ENV}  the lock directory shared by all runners on the machine
-  DISABLE_ROS_ISOLATION=1     run without reserving an ID (loudly)
+  {POOL_ENV}          domain IDs to hand out (default 1-101, e.g. 1-50,215-232)
+  {LOCK_DIR_ENV}         the lock directory shared by all runners on the machine
+  {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
+  {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
+  {DISABLE_VAR}=1                 run without reserving an ID (loudly)
 """
 
 
@@ -60,12 +61,10 @@ def cli() -> None:
     """
 
 
-def _finite(value: float | None, name: str) -> float | None:
-    """Reject nan and inf, which FloatRange lets through."""
+def _finite(_ctx: click.Context, param: click.Parameter, value: float | None) -> float | None:
+    """Reject nan and inf, which FloatRange lets through: either turns a limit off."""
     if value is not None and not math.isfinite(value):
-        raise click.BadParameter(
-            f"{value} is not a number of seconds (for {name} or {WAIT_TIMEOUT_ENV})"
-        )
+        raise click.BadParameter(f"{value} is not a number of seconds", param=param)
     return value
 
 
@@ -77,13 +76,11 @@ class _RunCommand(click.Command):
         try:
             return super().parse_args(ctx, args)
         except click.UsageError as error:
-            junit = _junit_xml_of(raw)
-            if junit is None:
-                raise
+            # One line (click's own error is three), and the result file when one was asked.
             message = (
                 f"ros-isolated-test run: {error.format_message()}; see ros-isolated-test run --help"
             )
-            ctx.exit(session.report_usage_error(message, junit))
+            ctx.exit(session.report_usage_error(message, _junit_xml_of(raw)))
 
 
 def _junit_xml_of(args: list[str]) -> Path | None:
@@ -100,7 +97,9 @@ def _junit_xml_of(args: list[str]) -> Path | None:
 
 @cli.command(
     cls=_RunCommand,
-    context_settings={"ignore_unknown_options": True, "allow_interspersed_args": False},
+    # The first word that is no option of ours starts the command: its own options follow
+    # it untouched. An unknown option before it is a typo, never the command.
+    context_settings={"allow_interspersed_args": False},
     epilog=f"{EXIT_CODES_HELP}\n\b\nExample:\n  ros-isolated-test run --junit-xml out.xml -- "
     "python3 -m pytest test/test_talker.py",
 )
@@ -119,12 +118,13 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     "--timeout",
     type=click.FloatRange(min=0, min_open=True),
     metavar="SECONDS",
+    callback=_finite,
     help="Stop the test after this long (SIGTERM, then SIGKILL after --kill-grace); exit 124.",
 )
 @click.option(
     "--kill-grace",
     type=click.FloatRange(min=0),
-    callback=lambda _ctx, _param, value: _finite(value, "--kill-grace"),
+    callback=_finite,
     default=5.0,
     show_default=True,
     metavar="SECONDS",
@@ -133,21 +133,17 @@ def _junit_xml_of(args: list[str]) -> Path | None:
 @click.option(
     "--wait-timeout",
     type=click.FloatRange(min=0),
-    callback=lambda _ctx, _param, value: _finite(value, "--wait-timeout"),
-    default=DEFAULT_WAIT_TIMEOUT,
-    show_default=True,
-    envvar=WAIT_TIMEOUT_ENV,
+    callback=_finite,
     metavar="SECONDS",
-    help=f"When every ID is in use, wait this long for one (first come, first served; "
-    f"env {WAIT_TIMEOUT_ENV}); 0 fails at once.",
+    help=f"When every ID is in use, wait this long for one (first come, first served); 0 fails "
+    f"at once. Default: {WAIT_TIMEOUT_ENV}, else {DEFAULT_WAIT_TIMEOUT:g}.",
 )
 @click.option(
     "--discovery-range",
     metavar="[LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT]",
-    envvar="ROS_ISOLATED_TEST_DISCOVERY_RANGE",
-    help="How far the test's DDS discovery reaches (env ROS_ISOLATED_TEST_DISCOVERY_RANGE). "
-    "Default: LOCALHOST, unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; SUBNET for tests that "
-    "need other hosts or more than 32 processes.",
+    help=f"How far the test's DDS discovery reaches. Default: {DISCOVERY_RANGE_ENV}, else "
+    "LOCALHOST unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; SUBNET for tests that need other "
+    "hosts or more than 32 processes.",
 )
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
@@ -156,7 +152,7 @@ def run(
     package_name: str | None,
     timeout: float | None,
     kill_grace: float,
-    wait_timeout: float,
+    wait_timeout: float | None,
     discovery_range: str | None,
     command: tuple[str, ...],
 ) -> None:
@@ -168,6 +164,11 @@ def run(
     starts is stopped when it ends, before the ID is released; SIGINT, SIGTERM and
     SIGHUP to the runner are passed on to the test.
     """
+    try:
+        config = settings.read(wait_timeout=wait_timeout, discovery_range=discovery_range)
+    except settings.SettingsError as error:
+        message = f"ros-isolated-test run: {error}"
+        sys.exit(session.report_usage_error(message, junit_xml))
     request = RunRequest(
         command=command,
         mode=Mode.SHELL,
@@ -177,9 +178,7 @@ def run(
         generate_result_on_success=True,
         timeout=timeout,
         kill_grace=kill_grace,
-        wait_timeout=wait_timeout,
-        # Checked where the result file can say what was wrong with it.
-        discovery_range=discovery_range,
+        settings=config,
     )
     sys.exit(session.run(request))
 
@@ -201,22 +200,27 @@ def runner_path() -> None:
 @cli.command()
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of a table.")
 def status(as_json: bool) -> None:
-    """List every domain ID in use on this machine, and by whom.
+    """List every domain ID in use on this machine, and by whom; then who waits for one.
 
     HELD BY is "runner" (a ros-isolated-test runner holds its lock), "port" (its TCP
     port 32768+ID is bound: upstream's domain_coordinator or another program) or
     "squatter" (a live process has ROS_DOMAIN_ID=<id> in its environment without
     holding it: a test that outlived its runner, a shell's export). The coordinator
-    skips all of them.
+    skips all of them. Runners queued for an ID follow, in the order they get one
+    (in --json: rows with "via": "queue", "domain_id": null and their "position").
     """
-    lock_dir = lock_dir_from_env()
+    from ros_isolated_test.domain_coordinator.status import held_domains, waiting_runners
+
     try:
-        pool = pool_from_env()
-    except PoolSpecError as error:
-        raise click.UsageError(str(error)) from None
-    held = held_domains(lock_dir, pool)
+        config = settings.read()
+    except settings.SettingsError as error:
+        click.echo(f"ros-isolated-test status: error: {error}", err=True)
+        sys.exit(2)
+    lock_dir = config.lock_dir
+    held = held_domains(lock_dir, config.pool)
+    waiters = waiting_runners(lock_dir)
     if as_json:
-        rows = [
+        rows: list[dict[str, object]] = [
             {
                 "domain_id": item.domain_id,
                 "via": item.via,
@@ -224,11 +228,25 @@ def status(as_json: bool) -> None:
             }
             for item in held
         ]
+        rows += [{**waiter.as_dict(), "domain_id": None, "via": "queue"} for waiter in waiters]
         click.echo(json.dumps(rows, indent=2))
         return
     if not held:
         click.echo(f"No domain ID of the pool is held (lock directory {lock_dir}).")
-        return
+    else:
+        _print_held(held)
+    if waiters:
+        click.echo("")
+        click.echo(f"Waiting for a domain ID ({len(waiters)}, first come, first served):")
+        click.echo(f"{'POS':>3}  {'PID':>7}  {'USER':<10} {'WAITING SINCE':<19}  COMMAND")
+        for waiter in waiters:
+            click.echo(
+                f"{waiter.position:>3}  {waiter.pid:>7}  {waiter.user:<10.10} "
+                f"{waiter.since_iso:<19}  {waiter.command}"
+            )
+
+
+def _print_held(held: list[HeldDomain]) -> None:
     click.echo(f"{'ID':>3}  {'HELD BY':<8} {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
     kinds = {"lock": "runner", "port": "port", "environment": "squatter"}
     for item in held:

@@ -2,48 +2,80 @@
 
 from __future__ import annotations
 
-import importlib.util
+import atexit
+import contextlib
 import os
+import shutil
 import subprocess
-import sys
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator
 from pathlib import Path
-from types import ModuleType
 
 import pytest
+from helpers import busy_machine, capabilities
+from helpers.commands import BIN, CLI, POLICY_VARS
+from helpers.processes import Children
+from helpers.workspace import CrosstalkBuilds
 
-REPO = Path(__file__).resolve().parent.parent
-BIN = Path(sys.executable).parent
-CLI = str(BIN / "ros-isolated-test")
-#: Variables that would change what the runner decides; tests set them explicitly.
-_POLICY_VARS = (
-    "ROS_DOMAIN_ID",
-    "DISABLE_ROS_ISOLATION",
-    "ROS_ISOLATED_TEST_DOMAINS",
-    "ROS_ISOLATED_TEST_LOCK_DIR",
-)
+#: Strict mode, as CI runs the suite: any skip fails (``pytest --no-skips`` does the same).
+NO_SKIPS_ENV = "ROS_ISOLATED_TEST_NO_SKIPS"
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption(
         "--no-skips",
         action="store_true",
-        help="strict mode (CI): a skipped test fails, with its reason; CI has every capability",
+        help="strict mode (CI): a skipped test fails, with its reason; CI has every capability "
+        f"(also {NO_SKIPS_ENV}=1)",
     )
 
 
+def _strict(config: pytest.Config) -> bool:
+    return bool(config.getoption("--no-skips")) or os.environ.get(NO_SKIPS_ENV) == "1"
+
+
 @pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_makereport(
-    item: pytest.Item, call: pytest.CallInfo[None]
-) -> Iterator[None]:
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
     """In strict mode a skip is a failure: CI has root, unshare and the outside tier."""
     outcome = yield
     report: pytest.TestReport = outcome.get_result()  # type: ignore[attr-defined]
-    if report.skipped and item.config.getoption("--no-skips") and not hasattr(report, "wasxfail"):
+    if report.skipped and _strict(item.config) and not hasattr(report, "wasxfail"):
         longrepr = report.longrepr
         reason = longrepr[2] if isinstance(longrepr, tuple) else str(longrepr)
         report.outcome = "failed"
         report.longrepr = f"strict mode (--no-skips): this test was skipped: {reason}"
+    scene = item.config.stash.get(_SCENE, None)
+    if report.failed and scene is not None:
+        report.sections.append(("busy machine", scene))
+
+
+#: What the busy-machine scene holds, for the reports of failing tests.
+_SCENE = pytest.StashKey[str]()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _busy_machine(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[None]:
+    """Every test runs on a machine that runs other ROS work: real holders of real IDs.
+
+    Runners in the default lock directory on the lowest free IDs, upstream's port
+    coordinator, and a process with ROS_DOMAIN_ID=7 (see helpers/busy_machine.py), for
+    the whole session: a test that assumes an ID is free, or the machine empty, fails.
+    """
+    if os.environ.get(busy_machine.QUIET_ENV) == "1":
+        yield
+        return
+    scene = busy_machine.build(BIN, tmp_path_factory.mktemp("busy-machine"))
+    atexit.register(scene.stop)  # an interrupt that skips fixture teardown
+    try:
+        described = scene.describe()
+        request.config.stash[_SCENE] = described
+        capture = request.config.pluginmanager.getplugin("capturemanager")
+        with capture.global_and_fixture_disabled() if capture else contextlib.nullcontext():
+            print(f"\n{described}", flush=True)
+        yield
+    finally:
+        scene.stop()
 
 
 @pytest.fixture
@@ -55,7 +87,7 @@ def lock_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture
 def env(lock_dir: Path) -> dict[str, str]:
     """The environment for runner processes: no ROS_DOMAIN_ID, our own lock dir."""
-    clean = {key: value for key, value in os.environ.items() if key not in _POLICY_VARS}
+    clean = {key: value for key, value in os.environ.items() if key not in POLICY_VARS}
     clean["ROS_ISOLATED_TEST_LOCK_DIR"] = str(lock_dir)
     clean["PATH"] = f"{BIN}{os.pathsep}{clean.get('PATH', '')}"
     return clean
@@ -64,7 +96,7 @@ def env(lock_dir: Path) -> dict[str, str]:
 @pytest.fixture(autouse=True)
 def _isolated_process_env(lock_dir: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """In-process calls see the same clean environment as subprocesses."""
-    for name in _POLICY_VARS:
+    for name in POLICY_VARS:
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("ROS_ISOLATED_TEST_LOCK_DIR", str(lock_dir))
     yield
@@ -78,45 +110,33 @@ def runner_script() -> str:
     ).stdout.strip()
 
 
-def run_cli(
-    args: Sequence[str], env: Mapping[str, str], **kwargs: object
-) -> subprocess.CompletedProcess[str]:
-    """``ros-isolated-test ARGS`` as a real process, output captured as text."""
-    return subprocess.run(  # type: ignore[call-overload, no-any-return]
-        [CLI, *args],
-        check=False,
-        env=dict(env),
-        capture_output=True,
-        text=True,
-        timeout=120,
-        **kwargs,
-    )
+@pytest.fixture
+def children() -> Iterator[Children]:
+    """Child processes of this test (holders, waiters); whatever still runs is killed."""
+    spawned = Children()
+    yield spawned
+    spawned.kill_all()
 
 
-def run_runner(
-    runner_script: str, args: Sequence[str], env: Mapping[str, str], **kwargs: object
-) -> subprocess.CompletedProcess[str]:
-    """The RUNNER script exactly as ctest calls it: ``python3 -u <script> ARGS``."""
-    return subprocess.run(  # type: ignore[call-overload, no-any-return]
-        [sys.executable, "-u", runner_script, *args],
-        check=False,
-        env=dict(env),
-        capture_output=True,
-        text=True,
-        timeout=120,
-        **kwargs,
-    )
+@pytest.fixture
+def traversable_dir(tmp_path: Path) -> Iterator[Path]:
+    """pytest's tmp dirs are private to root; other users need a way in to share locks."""
+    capabilities.require(capabilities.OTHER_USERS)
+    shared = Path(os.environ.get("TMPDIR", "/tmp")) / f"rit-shared-{os.getpid()}-{tmp_path.name}"
+    shared.mkdir(mode=0o777)
+    os.chmod(shared, 0o777)
+    try:
+        yield shared
+    finally:
+        shutil.rmtree(shared, ignore_errors=True)
 
 
-def crosstalk_workspace() -> ModuleType:
-    """``examples/crosstalk_workspace.py`` (examples/ is no package), loaded once by path."""
-    loaded = sys.modules.get("crosstalk_workspace")
-    if loaded is not None:
-        return loaded
-    path = REPO / "examples" / "crosstalk_workspace.py"
-    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up while being created
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="session")
+def crosstalk_builds(tmp_path_factory: pytest.TempPathFactory) -> CrosstalkBuilds:
+    """The example package, built once per runner for the whole session (colcon is slow).
+
+    Tests run ``colcon test`` on these builds one after another (each clears the last
+    run's results first); a test that needs a changed package copies what it needs.
+    """
+    capabilities.require(capabilities.COLCON)
+    return CrosstalkBuilds(tmp_path_factory.mktemp("crosstalk_ws"))

@@ -11,10 +11,9 @@ from collections.abc import Mapping, Sequence
 
 from ros_isolated_test.runner import discovery
 from ros_isolated_test.runner.request import EnvAssignment
+from ros_isolated_test.runner.settings import DISABLE_VAR, Settings, disables_isolation
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
-DISABLE_VAR = "DISABLE_ROS_ISOLATION"
-_FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
 
 
 class RefusedError(Exception):
@@ -48,12 +47,6 @@ class Policy:
         return {**env, DOMAIN_VAR: str(domain_id)}
 
 
-def isolation_disabled(environ: Mapping[str, str]) -> bool:
-    """DISABLE_ROS_ISOLATION as upstream reads it (set means disabled), except explicit no's."""
-    value = environ.get(DISABLE_VAR)
-    return value is not None and value.strip().lower() not in _FALSE_WORDS
-
-
 def apply_assignments(
     base: Mapping[str, str], assignments: Sequence[EnvAssignment]
 ) -> tuple[dict[str, str], list[str]]:
@@ -84,17 +77,25 @@ def apply_assignments(
 
 def decide(
     assignments: Sequence[EnvAssignment],
+    settings: Settings,
     environ: Mapping[str, str] | None = None,
     env_origin: str = "--env",
-    discovery_range: str | None = None,
 ) -> Policy:
     """Build the test's environment, or raise :class:`RefusedError` for a preset domain.
 
-    Raises :class:`~ros_isolated_test.runner.discovery.DiscoveryError` for a bad range.
+    DISABLE_ROS_ISOLATION counts wherever the test's environment gets it: the runner's
+    own environment (``settings``) or an ``--env`` assignment (ament_add_test's ENV),
+    which, like any assignment, has the last word. Raises
+    :class:`~ros_isolated_test.runner.discovery.DiscoveryError` for a range the test's
+    environment cannot carry (OFF on Humble).
     """
     environ = os.environ if environ is None else environ
     env, notes = apply_assignments(environ, assignments)
-    disabled = isolation_disabled(environ)
+    assigned = any(item.name == DISABLE_VAR and not item.append for item in assignments)
+    if assigned:
+        disabled, origin = disables_isolation(env.get(DISABLE_VAR)), f" (by {env_origin})"
+    else:
+        disabled, origin = settings.isolation_disabled, ""
     preset = [item for item in assignments if item.name == DOMAIN_VAR]
     if not disabled:
         if preset:
@@ -102,8 +103,8 @@ def decide(
             raise RefusedError(
                 f"refusing to run: {DOMAIN_VAR}={value!r} is passed with {env_origin}, so the "
                 f"test would share that domain with whatever else runs in it; remove it from "
-                f"{env_origin} (the runner picks a free ID), or set {DISABLE_VAR}=1 to run "
-                "without isolation"
+                f"{env_origin} (the runner picks a free ID), or add {DISABLE_VAR}=1 to "
+                f"{env_origin} (or the runner's environment) to run without isolation"
             )
         if DOMAIN_VAR in environ:
             value = environ[DOMAIN_VAR]
@@ -114,17 +115,17 @@ def decide(
                 f"(unset {DOMAIN_VAR}) and the runner picks a free ID, or set "
                 f"{DISABLE_VAR}=1 to run without isolation"
             )
-        confined = discovery.decide(env, discovery_range)
+        confined = discovery.decide(env, settings.discovery_range)
         return Policy(isolate=True, env=env, notes=tuple(notes), discovery=confined)
     domain = env.get(DOMAIN_VAR)
     where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
     warnings = [
-        f"WARNING: {DISABLE_VAR} is set: running WITHOUT isolation on {where}; "
+        f"WARNING: {DISABLE_VAR} is set{origin}: running WITHOUT isolation on {where}; "
         "this test hears and disturbs every other ROS process on that domain"
     ]
-    if discovery_range is not None:
+    if settings.discovery_range is not None:
         warnings.append(
-            f"WARNING: the discovery range {discovery_range} is not applied: {DISABLE_VAR} "
-            "leaves the test's environment as it is"
+            f"WARNING: the discovery range {settings.discovery_range} is not applied: "
+            f"{DISABLE_VAR} leaves the test's environment as it is"
         )
     return Policy(isolate=False, env=env, notes=(*notes, *warnings))

@@ -6,10 +6,20 @@ Plain classes rather than dataclasses, as everywhere on a test's path: importing
 
 from __future__ import annotations
 
-import os
-from collections.abc import Mapping
 from enum import Enum
 from pathlib import Path
+
+# Re-exported for callers that knew them here; settings.py reads and checks them.
+from ros_isolated_test.runner.settings import DEFAULT_WAIT_TIMEOUT, WAIT_TIMEOUT_ENV, Settings
+
+__all__ = [
+    "DEFAULT_WAIT_TIMEOUT",
+    "WAIT_TIMEOUT_ENV",
+    "EnvAssignment",
+    "Mode",
+    "RunRequest",
+    "test_name_of",
+]
 
 
 class Mode(Enum):
@@ -19,27 +29,6 @@ class Mode(Enum):
     SHELL = "shell"
     #: ctest RUNNER (run_test.py's contract): a command that cannot start counts as code 1.
     AMENT = "ament"
-
-
-WAIT_TIMEOUT_ENV = "ROS_ISOLATED_TEST_WAIT_TIMEOUT"
-DEFAULT_WAIT_TIMEOUT = 600.0
-
-
-def wait_timeout_from_env(environ: Mapping[str, str] | None = None) -> float:
-    """``ROS_ISOLATED_TEST_WAIT_TIMEOUT`` in seconds (default 10 minutes); ValueError if bad."""
-    environ = os.environ if environ is None else environ
-    text = environ.get(WAIT_TIMEOUT_ENV, "").strip()
-    if not text:
-        return DEFAULT_WAIT_TIMEOUT
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not 0 <= value < float("inf"):  # NaN fails both comparisons
-        raise ValueError(
-            f"{WAIT_TIMEOUT_ENV}={text!r} is not a number of seconds; set e.g. 600, or unset it"
-        )
-    return value
 
 
 def test_name_of(result_file: Path) -> str:
@@ -78,7 +67,6 @@ class RunRequest:
 
     __slots__ = (
         "command",
-        "discovery_range",
         "env",
         "env_origin",
         "generate_result_on_success",
@@ -87,10 +75,10 @@ class RunRequest:
         "output_file",
         "package_name",
         "result_file",
+        "settings",
         "skip_return_code",
         "skip_test",
         "timeout",
-        "wait_timeout",
     )
 
     def __init__(
@@ -107,8 +95,7 @@ class RunRequest:
         generate_result_on_success: bool = False,
         timeout: float | None = None,
         kill_grace: float = 5.0,
-        discovery_range: str | None = None,
-        wait_timeout: float = DEFAULT_WAIT_TIMEOUT,
+        settings: Settings | None = None,
         env_origin: str = "--env",
     ) -> None:
         self.command = command
@@ -122,10 +109,10 @@ class RunRequest:
         self.generate_result_on_success = generate_result_on_success
         self.timeout = timeout
         self.kill_grace = kill_grace
-        #: --discovery-range (or its variable); None: the runner's default policy.
-        self.discovery_range = discovery_range
-        #: How long to wait for a free ID when the pool is full, in seconds.
-        self.wait_timeout = wait_timeout
+        #: The runner's settings (pool, lock dir, wait timeout, discovery range), read once
+        #: by the entry point; None only for a request that never runs (a usage error's
+        #: result file), or for an embedding caller: then session reads the environment.
+        self.settings = settings
         #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
         self.env_origin = env_origin
 

@@ -14,17 +14,16 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
-from ros_isolated_test.domain_coordinator.pool import PoolSpecError
 from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
     PoolExhaustedError,
 )
 from ros_isolated_test.process import supervisor
 from ros_isolated_test.process.capture import OutputCapture
-from ros_isolated_test.runner import environment, exit_codes
+from ros_isolated_test.runner import environment, exit_codes, settings
 from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.request import Mode, RunRequest
-from ros_isolated_test.xunit.model import Outcome
+from ros_isolated_test.xunit.model import Case, Outcome
 from ros_isolated_test.xunit.result_file import NO_RESULT, ResultFile
 
 TYPE_CHECKING = False  # no typing import on a test's path
@@ -35,7 +34,8 @@ if TYPE_CHECKING:
 
 def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     """Reserve, run, write results; return the exit code the caller should exit with."""
-    console = console if console is not None else sys.stdout.buffer
+    _keep_standard_descriptors()
+    console = console if console is not None else _console()
     result = ResultFile(request)
     try:
         result.prepare()
@@ -46,6 +46,14 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
         )
         _error(console, message)
         return exit_codes.USAGE
+    if request.settings is None:
+        try:
+            request.settings = settings.read()
+        except settings.SettingsError as error:
+            return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
+    clash = same_file_message(request.output_file, request.result_file)
+    if clash is not None:
+        return _not_run(result, console, clash, Outcome.ERROR, exit_codes.USAGE)
     try:
         output = _open_output(request.output_file)
     except OSError as error:
@@ -56,20 +64,64 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
         return _not_run(result, console, message, Outcome.ERROR, exit_codes.USAGE)
     with output as handle:
         capture = OutputCapture(console, handle)
-        code = _run(request, result, capture, console)
-    # A result that could not be written is a failed run, never a silent pass.
-    return exit_codes.FAILED if code == 0 and result.write_error else code
+        code = _run(request, request.settings, result, capture, console)
+    # A result or output file that could not be written is a failed run, never a silent pass.
+    return exit_codes.final(code, result.write_error, capture.file_error)
 
 
-def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, console: BinaryIO) -> int:
+def same_file_message(output_file: Path | None, result_file: Path | None) -> str | None:
+    """The one-line error when --output-file and the result file are one file, else None.
+
+    Compared resolved (``./x`` and ``x``, a symlink and its target): the output would
+    overwrite the result, or the result replace the output, and one of them is lost.
+    """
+    if output_file is None or result_file is None:
+        return None
+    if os.path.realpath(output_file) != os.path.realpath(result_file):
+        return None
+    return (
+        f"--output-file {output_file} is the result file {result_file}: one would overwrite "
+        "the other; give the output file another name"
+    )
+
+
+def _keep_standard_descriptors() -> None:
+    """Put /dev/null where stdin, stdout or stderr is closed (``>&-``).
+
+    Otherwise the next file opened (a lock, the result file) takes descriptor 1 or 2:
+    the test would inherit it as its stdout, and our own messages would land in it.
+    """
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)  # the lowest free descriptor: ``fd``
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+
+
+def _console() -> BinaryIO:
+    """Where the test's output goes: stdout, or nowhere when stdout was closed at start."""
+    if sys.stdout is not None:
+        return sys.stdout.buffer
+    # Python leaves sys.stdout None for a descriptor closed at start: fd 1 is /dev/null now.
+    return open(1, "wb", buffering=0, closefd=False)  # lives as long as the run
+
+
+def _run(
+    request: RunRequest,
+    config: settings.Settings,
+    result: ResultFile,
+    capture: OutputCapture,
+    console: BinaryIO,
+) -> int:
     if request.skip_test:
         capture.note("skipping the test (--skip-test)")
         result.write([result.case(Outcome.SKIPPED, "Test skipped by developer (SKIP_TEST)")])
         return exit_codes.PASSED
     try:
-        policy = environment.decide(
-            request.env, env_origin=request.env_origin, discovery_range=request.discovery_range
-        )
+        policy = environment.decide(request.env, config, env_origin=request.env_origin)
     except environment.RefusedError as refusal:
         return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     except DiscoveryError as error:
@@ -77,7 +129,7 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
     result.write_placeholder()
     guard = _Guard()
     try:
-        with _interruptible(guard), _domain(policy, request, capture) as domain_id:
+        with _interruptible(guard), _domain(policy, request, config, capture) as domain_id:
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
                 result.properties["ros_domain_id"] = str(domain_id)
@@ -100,8 +152,16 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
             outcome = supervisor.run(
                 request.command, env, capture, request.timeout, request.kill_grace
             )
-    except PoolSpecError as error:
-        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
+            # Named before the ID is released: the block note (_domain) follows.
+            for leftover in outcome.leftovers:
+                capture.note(f"stopped process {leftover}, left running by the test")
+            if outcome.leftovers:
+                result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
+            survivors = [survivor.describe() for survivor in outcome.survivors]
+            for survivor in survivors:
+                capture.note(f"process {survivor} of the test could not be ended (SIGKILL failed)")
+            if survivors:
+                result.properties["surviving_processes"] = ", ".join(survivors)
     except (PoolExhaustedError, LockDirError) as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
     except Interrupted as interruption:
@@ -114,10 +174,6 @@ def _run(request: RunRequest, result: ResultFile, capture: OutputCapture, consol
     if guard.late is not None:
         # The test had ended: the run's outcome stands, the signal is only noted.
         result.properties["signal_after_test"] = exit_codes.signal_name(guard.late)
-    for leftover in outcome.leftovers:
-        capture.note(f"stopped process {leftover}, left running by the test")
-    if outcome.leftovers:
-        result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
     return _conclude(request, result, capture, outcome)
 
 
@@ -162,14 +218,36 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
 
 @contextlib.contextmanager
 def _domain(
-    policy: environment.Policy, request: RunRequest, capture: OutputCapture
+    policy: environment.Policy,
+    request: RunRequest,
+    config: settings.Settings,
+    capture: OutputCapture,
 ) -> Iterator[int | None]:
     if not policy.isolate:
         yield None
         return
-    coordinator = DomainCoordinator()
-    with coordinator.reserve(request.command, request.wait_timeout, capture.note) as held:
-        yield held.domain_id
+    coordinator = DomainCoordinator(config.lock_dir, config.pool)
+    with coordinator.reserve(request.command, config.wait_timeout, capture.note) as held:
+        try:
+            yield held.domain_id
+        finally:
+            # However the run ended: what of the test's tree still lives (not ours to
+            # kill, stuck in the kernel) keeps the ID from every runner until it is gone.
+            survivors = supervisor.survivors()
+            if survivors:
+                names = ", ".join(survivor.describe() for survivor in survivors)
+                try:
+                    record = held.block_for(survivors)
+                except OSError as error:
+                    capture.note(
+                        f"cannot keep ROS_DOMAIN_ID {held.domain_id} blocked while {names} "
+                        f"live: {error}; make the lock directory writable"
+                    )
+                else:
+                    capture.note(
+                        f"ROS_DOMAIN_ID {held.domain_id} stays blocked while {names} live "
+                        f"({record.name}); see ros-isolated-test status"
+                    )
 
 
 def _conclude(
@@ -178,112 +256,104 @@ def _conclude(
     capture: OutputCapture,
     outcome: supervisor.Outcome,
 ) -> int:
-    """Turn how the test ended into the result file and the exit code."""
-    code, reason = _code_and_reason(request, outcome)
+    """Turn how the test ended into the result file and the exit code (rules: exit_codes)."""
+    code, reason = exit_codes.ended(outcome, request.mode is Mode.AMENT, request.timeout)
     result.properties["exit"] = reason
     if outcome.returncode is not None and outcome.returncode >= 0:
         result.properties["exit_code"] = str(outcome.returncode)
     if outcome.signal is not None:
         result.properties["signal"] = exit_codes.signal_name(outcome.signal)
     result.properties["duration"] = f"{outcome.duration:.3f}"
+    if capture.file_error is not None:
+        result.properties["output_file_error"] = capture.file_error
     if outcome.start_error is not None:
         capture.note(f"invocation failed: {outcome.start_error}")
     capture.note(f"the test {reason}")
     if result.path is None:
         return code
     duration = outcome.duration
-    skip_code = (
-        request.skip_return_code is not None and outcome.returncode == request.skip_return_code
+    skip = exit_codes.is_skip(outcome, request.skip_return_code)
+    written = exit_codes.what_to_write(
+        code,
+        skip,
+        request.generate_result_on_success,
+        own_file=not result.untouched(),
+        shell=request.mode is Mode.SHELL,
     )
-    # ctest RUNNER: the flag wins over the test's own file, as in run_test.py. `run` never
-    # throws away a file the test wrote itself: it always generates, so it must look first.
-    own_file_first = request.mode is Mode.SHELL and not result.untouched()
-    if code == 0 and request.generate_result_on_success and not own_file_first:
-        result.write([result.case(Outcome.PASSED, duration=duration)], duration)
-        return code
-    if result.untouched():
-        output = capture.tail_text()
-        if skip_code:
-            capture.note(f"return code {outcome.returncode} means skipped (--skip-return-code)")
-            message = f"Test skipped: it returned {outcome.returncode}."
-            result.write([result.case(Outcome.SKIPPED, message, duration)], duration)
-            return code
-        if code == 0:
-            message = f"{NO_RESULT}\n\n{output}"
-            result.write([result.case(Outcome.ERROR, message, duration)], duration)
-            capture.note(f"{NO_RESULT} Failing it (write one, or use --generate-result-on-success)")
-            return exit_codes.FAILED
+    if written == exit_codes.WRITE_OWN:
+        return _adopt(result, capture, outcome, code, reason, skip)
+    tail = capture.tail_text()
+    if written == exit_codes.WRITE_PASSED:
+        cases = [result.case(Outcome.PASSED, duration=duration)]
+    elif written == exit_codes.WRITE_SKIPPED:
+        capture.note(f"return code {outcome.returncode} means skipped (--skip-return-code)")
+        message = f"Test skipped: it returned {outcome.returncode}."
+        cases = [result.case(Outcome.SKIPPED, message, duration)]
+    elif written == exit_codes.WRITE_NO_RESULT:
+        cases = [result.case(Outcome.ERROR, f"{NO_RESULT}\n\n{tail}", duration)]
+        capture.note(f"{NO_RESULT} Failing it (write one, or use --generate-result-on-success)")
+    else:
         kind = Outcome.ERROR if outcome.start_error is not None else Outcome.FAILURE
         detail = f"The test {reason}."
         if request.mode is Mode.AMENT:
             detail = f"{NO_RESULT} {detail}"
-        result.write([result.case(kind, f"{detail}\n\n{output}", duration)], duration)
-        return code
+        cases = [result.case(kind, f"{detail}\n\n{tail}", duration)]
+    output = ""
+    if exit_codes.output_lost(exit_codes.code_for(written, code), capture.file_error):
+        cases.append(_output_lost_case(result, capture))
+        output = tail
+    result.write(cases, duration, output)
+    return exit_codes.code_for(written, code, any(case.outcome.failed for case in cases))
+
+
+def _adopt(
+    result: ResultFile,
+    capture: OutputCapture,
+    outcome: supervisor.Outcome,
+    code: int,
+    reason: str,
+    skip: bool,
+) -> int:
+    """The test wrote its own result file: make it canonical, reconciled with its exit."""
     from ros_isolated_test.xunit import normalise
 
     cases = result.adopt()
     for problem in result.problems:
         capture.note(f"result file {result.path}: {problem}")
-    abnormal = (
-        outcome.signal is not None or outcome.timed_out or outcome.received_signal is not None
-    )
-    if abnormal or (code != 0 and not skip_code and not any(c.outcome.failed for c in cases)):
-        cases.append(
-            normalise.exit_case(
-                result.suite_name, reason, all_passed=not any(c.outcome.failed for c in cases)
-            )
-        )
-    failed = any(case.outcome.failed for case in cases)
-    output = capture.tail_text() if failed or code else ""
-    rendered = result.write(cases, duration, output, checked=True)
-    if rendered is not None and rendered.failed:
+    any_failed = any(case.outcome.failed for case in cases)
+    if exit_codes.needs_exit_case(outcome, code, skip, any_failed):
+        cases.append(normalise.exit_case(result.suite_name, reason, all_passed=not any_failed))
+        any_failed = True
+    if not any_failed and exit_codes.output_lost(code, capture.file_error):
+        cases.append(_output_lost_case(result, capture))
+        any_failed = True
+    output = capture.tail_text() if any_failed or code else ""
+    rendered = result.write(cases, outcome.duration, output, checked=True)
+    reports_failure = rendered is not None and rendered.failed
+    if reports_failure:
         capture.note(f"the result file {result.path} reports failures or errors")
-        return code or exit_codes.FAILED
-    return code
+    return exit_codes.code_for(exit_codes.WRITE_OWN, code, reports_failure)
 
 
-def _code_and_reason(request: RunRequest, outcome: supervisor.Outcome) -> tuple[int, str]:
-    if outcome.start_error is not None:
-        error = outcome.start_error
-        if request.mode is Mode.AMENT:
-            return exit_codes.FAILED, f"could not be started: {error}"
-        if isinstance(error, FileNotFoundError):
-            return exit_codes.NOT_FOUND, f"could not be started: {error}"
-        return exit_codes.NOT_EXECUTABLE, f"could not be started: {error}"
-    if outcome.received_signal is not None:
-        received = exit_codes.signal_name(outcome.received_signal)
-        ended = (
-            f"was killed by {exit_codes.signal_name(outcome.signal)}"
-            if outcome.signal is not None
-            else f"exited with code {outcome.returncode}"
-        )
-        return (
-            exit_codes.for_signal(outcome.received_signal),
-            f"was interrupted: the runner received {received}, passed it on, and the test {ended}",
-        )
-    if outcome.timed_out:
-        limit = f"{request.timeout:g}" if request.timeout is not None else "?"
-        return (
-            exit_codes.TIMEOUT,
-            f"timed out after {outcome.duration:.1f} s (--timeout {limit}) and was stopped",
-        )
-    signum = outcome.signal
-    if signum is not None:
-        name = exit_codes.signal_name(signum)
-        return exit_codes.for_signal(signum), f"was killed by {name} (signal {signum})"
-    assert outcome.returncode is not None
-    return outcome.returncode, f"exited with code {outcome.returncode}"
+def _output_lost_case(result: ResultFile, capture: OutputCapture) -> Case:
+    """An error case for a test that passed but whose --output-file lost output (full disk)."""
+    message = (
+        f"{capture.file_error}; so --output-file {result.request.output_file} is incomplete "
+        "(the console and this result file got the output); free space or choose another path"
+    )
+    return Case.saying(result.suite_name, "output file", Outcome.ERROR, message)
 
 
 def report_usage_error(message: str, result_file: Path | None) -> int:
     """Arguments that cannot be understood: say so in one line, still leave a result file."""
+    _keep_standard_descriptors()
     result = ResultFile(RunRequest(command=(), mode=Mode.AMENT, result_file=result_file))
     try:
         result.prepare()
     except OSError:
-        _error(sys.stdout.buffer, message)
+        _error(_console(), message)
         return exit_codes.USAGE
-    return _not_run(result, sys.stdout.buffer, message, Outcome.ERROR, exit_codes.USAGE)
+    return _not_run(result, _console(), message, Outcome.ERROR, exit_codes.USAGE)
 
 
 def _not_run(result: ResultFile, console: BinaryIO, message: str, kind: Outcome, code: int) -> int:
@@ -301,7 +371,9 @@ def _error(console: BinaryIO, message: str) -> None:
     with contextlib.suppress(OSError, ValueError):
         # A reader that went away (ctest killed by the same Ctrl-C) loses nothing here:
         # everything this says is in the result file already.
-        print(f"ros-isolated-test: error: {message}", file=sys.stderr, flush=True)
+        # sys.stderr is None when it was closed at start: print would write to stdout.
+        if sys.stderr is not None:
+            print(f"ros-isolated-test: error: {message}", file=sys.stderr, flush=True)
 
 
 def _open_output(path: Path | None) -> contextlib.AbstractContextManager[BinaryIO | None]:

@@ -6,18 +6,12 @@ everything after ``--command`` is the test's command line, options included.
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ros_isolated_test.runner import discovery, exit_codes, session
-from ros_isolated_test.runner.request import (
-    EnvAssignment,
-    Mode,
-    RunRequest,
-    wait_timeout_from_env,
-)
+from ros_isolated_test.runner import exit_codes, session, settings
+from ros_isolated_test.runner.request import EnvAssignment, Mode, RunRequest
 
 PROG = "run_test_isolated.py"
 DESCRIPTION = (
@@ -25,7 +19,12 @@ DESCRIPTION = (
     "this machine, runs the test with it and makes sure a result file is left. Accepts "
     "the arguments of ament_cmake_test's run_test.py."
 )
-EPILOG = "Set DISABLE_ROS_ISOLATION=1 to run without a reserved domain ID."
+EPILOG = (
+    "Set DISABLE_ROS_ISOLATION=1 (in the environment, or with --env / ament_add_test's ENV) "
+    "to run without a reserved domain ID. Also read: ROS_ISOLATED_TEST_DOMAINS, "
+    "ROS_ISOLATED_TEST_LOCK_DIR, ROS_ISOLATED_TEST_WAIT_TIMEOUT, "
+    "ROS_ISOLATED_TEST_DISCOVERY_RANGE (see ros-isolated-test run --help)."
+)
 
 #: run_test.py's options: (name, metavar or None for a flag, repeats, help). No argparse:
 #: it is imported by every test's runner, and this fixed set needs none of it.
@@ -208,13 +207,11 @@ def parse(argv: Sequence[str]) -> RunRequest:
             for assignment in _assignments(occurrence, option, append)
         ]
         single = {name: found[-1][0] for name, found in values.items()}
-        wait_timeout = wait_timeout_from_env()
-        override = os.environ.get(discovery.OVERRIDE_ENV, "").strip() or None
         return RunRequest(
             command=tuple(command),
             mode=Mode.AMENT,
-            wait_timeout=wait_timeout,
-            discovery_range=override,
+            # RUNNER mode has no options of its own for these: the environment only.
+            settings=settings.read(),
             result_file=result_file,
             package_name=single.get("--package-name"),
             output_file=Path(single["--output-file"]) if "--output-file" in single else None,

@@ -70,9 +70,11 @@ def _exit(code: int) -> "NoReturn":
     only cost each test more time.
     """
     for stream in (sys.stdout, sys.stderr):
-        # A console that went away loses nothing: the result file holds everything.
+        # A console that went away (or was closed at start: None) loses nothing: the
+        # result file holds everything.
         with contextlib.suppress(OSError, ValueError):
-            stream.flush()
+            if stream is not None:
+                stream.flush()
     os._exit(code)
 
 

@@ -1,0 +1,137 @@
+"""The runner's own settings: read from arguments and the environment once, checked once.
+
+Every entry point (``run``, the ctest RUNNER script, ``status``) builds one
+:class:`Settings` here, before anything else happens, and hands it on: nothing deeper
+(policy, coordinator, status) reads a ros-isolated-test variable itself, so a variable
+has one parser, one error message and one meaning everywhere. An option given on the
+command line wins over its variable, and the variable is then not read at all.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from ros_isolated_test.domain_coordinator.lock_dir import LOCK_DIR_ENV, lock_dir_from_env
+from ros_isolated_test.domain_coordinator.pool import POOL_ENV, PoolSpecError, pool_from_env
+from ros_isolated_test.runner import discovery
+
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+WAIT_TIMEOUT_ENV = "ROS_ISOLATED_TEST_WAIT_TIMEOUT"
+DEFAULT_WAIT_TIMEOUT = 600.0
+DISCOVERY_RANGE_ENV = discovery.OVERRIDE_ENV
+DISABLE_VAR = "DISABLE_ROS_ISOLATION"
+#: Values of DISABLE_ROS_ISOLATION that do not disable (upstream treats "set" as disabled).
+_FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
+
+__all__ = [
+    "DEFAULT_WAIT_TIMEOUT",
+    "DISABLE_VAR",
+    "DISCOVERY_RANGE_ENV",
+    "LOCK_DIR_ENV",
+    "POOL_ENV",
+    "WAIT_TIMEOUT_ENV",
+    "Settings",
+    "SettingsError",
+    "disables_isolation",
+    "read",
+]
+
+
+class SettingsError(ValueError):
+    """A setting that cannot be used: one line naming the option or variable and the fix."""
+
+
+class Settings:
+    """What the runner was configured to do, whoever configured it."""
+
+    __slots__ = ("discovery_range", "isolation_disabled", "lock_dir", "pool", "wait_timeout")
+
+    def __init__(
+        self,
+        *,
+        lock_dir: Path,
+        pool: tuple[int, ...],
+        wait_timeout: float = DEFAULT_WAIT_TIMEOUT,
+        discovery_range: str | None = None,
+        isolation_disabled: bool = False,
+    ) -> None:
+        #: The shared lock directory (ROS_ISOLATED_TEST_LOCK_DIR).
+        self.lock_dir = lock_dir
+        #: The IDs to hand out (ROS_ISOLATED_TEST_DOMAINS).
+        self.pool = pool
+        #: Seconds to wait for a free ID (--wait-timeout, ROS_ISOLATED_TEST_WAIT_TIMEOUT).
+        self.wait_timeout = wait_timeout
+        #: A checked range name (--discovery-range, its variable), None: the default policy.
+        self.discovery_range = discovery_range
+        #: DISABLE_ROS_ISOLATION in the runner's own environment.
+        self.isolation_disabled = isolation_disabled
+
+    def __repr__(self) -> str:
+        return (
+            f"Settings(lock_dir={self.lock_dir!r}, pool={len(self.pool)} IDs, "
+            f"wait_timeout={self.wait_timeout!r}, discovery_range={self.discovery_range!r}, "
+            f"isolation_disabled={self.isolation_disabled!r})"
+        )
+
+
+def disables_isolation(value: str | None) -> bool:
+    """DISABLE_ROS_ISOLATION as upstream reads it (set means disabled), except explicit no's."""
+    return value is not None and value.strip().lower() not in _FALSE_WORDS
+
+
+def seconds(text: str, name: str, fix: str) -> float:
+    """A finite, non-negative number of seconds, or :class:`SettingsError` naming ``name``.
+
+    nan and inf are refused: either would silently turn a limit off.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not (math.isfinite(value) and value >= 0):
+        raise SettingsError(f"{name}={text!r} is not a number of seconds; {fix}")
+    return value
+
+
+def read(
+    environ: Mapping[str, str] | None = None,
+    *,
+    wait_timeout: float | None = None,
+    discovery_range: str | None = None,
+) -> Settings:
+    """The settings from options (None: not given) and ``environ`` (default: os.environ).
+
+    Raises :class:`SettingsError` for a value that cannot be used.
+    """
+    environ = os.environ if environ is None else environ
+    if wait_timeout is None:
+        text = environ.get(WAIT_TIMEOUT_ENV, "").strip()
+        wait_timeout = DEFAULT_WAIT_TIMEOUT
+        if text:
+            wait_timeout = seconds(text, WAIT_TIMEOUT_ENV, "set e.g. 600, or unset it")
+    if discovery_range is not None:
+        origin = "--discovery-range"
+    else:
+        discovery_range = environ.get(DISCOVERY_RANGE_ENV, "").strip() or None
+        origin = DISCOVERY_RANGE_ENV
+    if discovery_range is not None:
+        try:
+            discovery_range = discovery.check_range(discovery_range, origin)
+        except discovery.DiscoveryError as error:
+            raise SettingsError(str(error)) from None
+    try:
+        pool = pool_from_env(environ)
+    except PoolSpecError as error:
+        raise SettingsError(str(error)) from None
+    return Settings(
+        lock_dir=lock_dir_from_env(environ),
+        pool=pool,
+        wait_timeout=wait_timeout,
+        discovery_range=discovery_range,
+        isolation_disabled=disables_isolation(environ.get(DISABLE_VAR)),
+    )

@@ -1,0 +1,122 @@
+"""Settings are read once, from options and the environment, and each error names its source."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from helpers.commands import ament, run_cli
+from helpers.results import load_result
+
+from ros_isolated_test.runner import settings
+from ros_isolated_test.runner.settings import (
+    DEFAULT_WAIT_TIMEOUT,
+    DISCOVERY_RANGE_ENV,
+    LOCK_DIR_ENV,
+    POOL_ENV,
+    WAIT_TIMEOUT_ENV,
+    SettingsError,
+)
+
+
+def test_defaults_and_values_from_the_environment(tmp_path: Path) -> None:
+    plain = settings.read({})
+    assert plain.wait_timeout == DEFAULT_WAIT_TIMEOUT
+    assert plain.pool == tuple(range(1, 102))
+    assert plain.discovery_range is None
+    assert plain.isolation_disabled is False
+    given = settings.read(
+        {
+            WAIT_TIMEOUT_ENV: " 7.5 ",
+            POOL_ENV: "3-4,9",
+            LOCK_DIR_ENV: str(tmp_path),
+            DISCOVERY_RANGE_ENV: "subnet",
+            "DISABLE_ROS_ISOLATION": "yes",
+        }
+    )
+    assert given.wait_timeout == 7.5
+    assert given.pool == (3, 4, 9)
+    assert given.lock_dir == tmp_path
+    assert given.discovery_range == "SUBNET"
+    assert given.isolation_disabled is True
+
+
+def test_an_option_wins_and_its_variable_is_not_even_read() -> None:
+    environ = {WAIT_TIMEOUT_ENV: "nan", DISCOVERY_RANGE_ENV: "nowhere"}
+    chosen = settings.read(environ, wait_timeout=3.0, discovery_range="OFF")
+    assert (chosen.wait_timeout, chosen.discovery_range) == (3.0, "OFF")
+
+
+@pytest.mark.parametrize(
+    ("environ", "option", "named"),
+    [
+        ({WAIT_TIMEOUT_ENV: "nan"}, {}, WAIT_TIMEOUT_ENV),
+        ({WAIT_TIMEOUT_ENV: "inf"}, {}, WAIT_TIMEOUT_ENV),
+        ({WAIT_TIMEOUT_ENV: "-1"}, {}, WAIT_TIMEOUT_ENV),
+        ({WAIT_TIMEOUT_ENV: "ten"}, {}, WAIT_TIMEOUT_ENV),
+        ({POOL_ENV: "0-5"}, {}, POOL_ENV),
+        ({DISCOVERY_RANGE_ENV: "LOCAL HOST"}, {}, DISCOVERY_RANGE_ENV),
+        ({}, {"discovery_range": "nowhere"}, "--discovery-range"),
+    ],
+)
+def test_a_bad_value_is_one_line_naming_its_source(
+    environ: dict[str, str], option: dict[str, str], named: str
+) -> None:
+    with pytest.raises(SettingsError) as raised:
+        settings.read(environ, **option)  # type: ignore[arg-type]
+    message = str(raised.value)
+    assert named in message and "\n" not in message
+    others = {WAIT_TIMEOUT_ENV, POOL_ENV, DISCOVERY_RANGE_ENV, "--discovery-range"} - {named}
+    assert not [other for other in others if other in message], message
+
+
+@pytest.mark.parametrize("entry", ["run", "runner", "status"])
+def test_every_entry_point_refuses_a_bad_variable_in_one_line_with_exit_2(
+    env: dict[str, str], runner_script: str, tmp_path: Path, entry: str
+) -> None:
+    env[WAIT_TIMEOUT_ENV] = "nan"
+    result = tmp_path / "pkg" / "r.xml"
+    if entry == "run":
+        proc = run_cli(["run", "--junit-xml", str(result), "--", "touch", "ran"], env, cwd=tmp_path)
+    elif entry == "runner":
+        proc = ament(runner_script, result, ["touch", "ran"], env, cwd=tmp_path)
+    else:
+        proc = run_cli(["status"], env, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and WAIT_TIMEOUT_ENV in lines[0], proc.stderr
+    assert not (tmp_path / "ran").exists()
+    if entry != "status":
+        case = load_result(result).only
+        assert case.outcome == "error" and WAIT_TIMEOUT_ENV in case.message
+    # Control: with the variable fixed, the same call goes through.
+    env[WAIT_TIMEOUT_ENV] = "30"
+    if entry == "run":
+        again = run_cli(
+            ["run", "--junit-xml", str(result), "--", "touch", "ran"], env, cwd=tmp_path
+        )
+    elif entry == "runner":
+        again = ament(
+            runner_script,
+            result,
+            ["touch", "ran"],
+            env,
+            "--generate-result-on-success",
+            cwd=tmp_path,
+        )
+    else:
+        again = run_cli(["status"], env, cwd=tmp_path)
+    assert again.returncode == 0, again.stdout + again.stderr
+
+
+def test_the_wait_timeout_option_is_not_read_from_the_variable_by_click(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """One parser: a bad variable is reported by settings (naming it), not by click."""
+    env[WAIT_TIMEOUT_ENV] = "ten"
+    proc = run_cli(["run", "--", "true"], env, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert f"{WAIT_TIMEOUT_ENV}='ten' is not a number of seconds" in proc.stderr, proc.stderr
+    # The option given, the variable is never read.
+    given = run_cli(["run", "--wait-timeout", "5", "--", "true"], env, cwd=tmp_path)
+    assert given.returncode == 0, given.stdout + given.stderr

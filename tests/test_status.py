@@ -1,0 +1,126 @@
+"""``status`` lists runners queued for an ID, not only the IDs held: real holder, real waiter."""
+
+from __future__ import annotations
+
+import getpass
+import json
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from helpers.commands import CLI, HUNG, run_cli
+from helpers.domains import free_ids
+
+from ros_isolated_test.domain_coordinator.queue import Queue
+
+DEADLINE = 60.0
+
+
+def _poll(condition: Callable[[], bool], what: str) -> None:
+    end = time.monotonic() + DEADLINE
+    while not condition():
+        assert time.monotonic() < end, what
+        time.sleep(0.1)
+
+
+@pytest.fixture
+def one_id(env: dict[str, str]) -> dict[str, str]:
+    (domain_id,) = free_ids(1)
+    return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
+
+
+@pytest.fixture
+def started(tmp_path: Path) -> Iterator[list[subprocess.Popen[bytes]]]:
+    processes: list[subprocess.Popen[bytes]] = []
+    yield processes
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+        process.wait(HUNG)
+
+
+def _start(
+    args: list[str], env: dict[str, str], log: Path, into: list[subprocess.Popen[bytes]]
+) -> subprocess.Popen[bytes]:
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [CLI, *args], env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT
+        )
+    into.append(process)
+    return process
+
+
+def _rows(env: dict[str, str]) -> list[dict[str, object]]:
+    listed = run_cli(["status", "--json"], env)
+    assert listed.returncode == 0, listed.stderr
+    rows: list[dict[str, object]] = json.loads(listed.stdout)
+    return rows
+
+
+def test_status_lists_a_waiting_runner_with_its_pid_user_command_and_place(
+    one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
+) -> None:
+    holder = _start(["run", "--", "sleep", "60"], one_id, tmp_path / "holder.log", started)
+    _poll(
+        lambda: any(row.get("pid") == holder.pid for row in _rows(one_id)),
+        "the holder never held the ID",
+    )
+    # Control: one runner holds, nobody waits.
+    assert [row for row in _rows(one_id) if row["via"] == "queue"] == []
+    assert "Waiting for a domain ID" not in run_cli(["status"], one_id).stdout
+
+    waiter = _start(
+        ["run", "--wait-timeout", "120", "--", "echo", "waiter-marker"],
+        one_id,
+        tmp_path / "waiter.log",
+        started,
+    )
+
+    def queued() -> list[dict[str, object]]:
+        assert waiter.poll() is None, (tmp_path / "waiter.log").read_text()
+        return [row for row in _rows(one_id) if row["via"] == "queue"]
+
+    _poll(lambda: bool(queued()), "the waiting runner never showed in status --json")
+    (row,) = queued()
+    assert row["pid"] == waiter.pid
+    assert row["position"] == 1
+    assert row["domain_id"] is None
+    assert row["user"] == getpass.getuser()
+    assert "echo waiter-marker" in str(row["command"])
+    assert isinstance(row["started"], float) and row["started"] <= time.time()
+    held = [row for row in _rows(one_id) if row["via"] == "lock"]
+    assert [item["pid"] for item in held] == [holder.pid]  # held rows keep their shape
+
+    table = run_cli(["status"], one_id).stdout
+    assert "Waiting for a domain ID" in table, table
+    waiting = table.split("Waiting for a domain ID", 1)[1].splitlines()
+    line = next(item for item in waiting if f" {waiter.pid} " in item)
+    assert line.split()[0] == "1"
+    assert "echo waiter-marker" in line
+
+    # The holder ends: the waiter gets the ID, runs, and leaves the queue.
+    holder.send_signal(signal.SIGTERM)
+    assert waiter.wait(HUNG) == 0, (tmp_path / "waiter.log").read_text()
+    assert "waiter-marker" in (tmp_path / "waiter.log").read_text()
+    assert [row for row in _rows(one_id) if row["via"] == "queue"] == []
+
+
+def test_a_ticket_record_planted_by_nobody_trustworthy_is_read_safely(
+    lock_dir: Path,
+) -> None:
+    """A ticket whose record is garbage, or a link, never breaks status: the name still says."""
+    queue = Queue(lock_dir)
+    with queue.ticket(["my", "test"]) as ticket:
+        assert ticket is not None
+        (waiter,) = queue.waiters()
+        assert (waiter.pid, waiter.command, waiter.position) == (os.getpid(), "my test", 1)
+        # Someone replaces the record with a link to a secret: read as a regular file only.
+        path = queue.path / ticket.name
+        os.unlink(path)
+        os.symlink("/etc/shadow", path)
+        assert queue.waiters() == []  # a link is no live ticket: not locked by anyone
+    assert queue.waiters() == []
