@@ -1,7 +1,8 @@
 """The RUNNER script called exactly as ctest calls it, one test per item of the contract.
 
-See ../shared/reference/ament-runner-contract.md ("What run_test.py does" and
-"What run_test_isolated.py adds"). Every test runs real processes against its own lock dir.
+The contract is docs/ament-runner-contract.md: what ctest passes to a RUNNER, what
+run_test.py does with each argument, the result file and exit code we keep, and where we
+differ on purpose. Every test runs real processes against its own lock dir.
 """
 
 from __future__ import annotations
@@ -14,147 +15,16 @@ import signal
 import socket
 import subprocess
 import sys
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from conftest import run_runner
+from helpers.commands import ament, run_runner
+from helpers.results import DOMAIN_LINE, NO_RESULT, domain_of, load_result, own_result
 from lxml import etree
-
-from ros_isolated_test.xunit import validate
-
-NO_RESULT = "did not generate a result file"
-DOMAIN_LINE = re.compile(r"Running with ROS_DOMAIN_ID (\d+)")
-
-
-# --- result files ------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class CaseResult:
-    """One ``<testcase>``: its outcome and the text of its failure/error/skipped child."""
-
-    classname: str
-    name: str
-    outcome: str
-    message: str
-    text: str
-
-
-@dataclass(frozen=True)
-class ResultSummary:
-    """What a result file says, after checking it is well-formed xUnit."""
-
-    suites: tuple[str, ...]
-    cases: tuple[CaseResult, ...]
-    properties: dict[str, str]
-
-    @property
-    def only(self) -> CaseResult:
-        assert len(self.cases) == 1, self.cases
-        return self.cases[0]
-
-
-_OUTCOMES = ("failure", "error", "skipped")
-
-
-def load_result(path: Path) -> ResultSummary:
-    """Parse ``path`` with lxml and check it: our schema, root ``testsuites``, counts that match.
-
-    Fails the calling test if the file is not the xUnit every CI tool reads. Every file
-    the runner writes passes through here: the runner's own results are not validated
-    at run time, so this is where they are.
-    """
-    assert path.is_file(), f"no result file at {path}"
-    root = etree.parse(str(path), etree.XMLParser(resolve_entities=False)).getroot()
-    assert validate.problems(root) == [], f"{path} does not match schemas/junit.xsd"
-    assert root.tag == "testsuites", f"root is <{root.tag}>, not <testsuites>"
-    suites: list[str] = []
-    cases: list[CaseResult] = []
-    properties: dict[str, str] = {}
-    totals = dict.fromkeys(("tests", "failures", "errors", "skipped"), 0)
-    for suite in root.iter("testsuite"):
-        suites.append(suite.get("name", ""))
-        suite_cases = [_case(node) for node in suite.findall("testcase")]
-        counts = {
-            "tests": len(suite_cases),
-            "failures": sum(case.outcome == "failure" for case in suite_cases),
-            "errors": sum(case.outcome == "error" for case in suite_cases),
-            "skipped": sum(case.outcome == "skipped" for case in suite_cases),
-        }
-        for attribute, expected in counts.items():
-            value = suite.get(attribute)
-            assert value is not None, f"suite {suites[-1]!r} lacks {attribute}="
-            assert re.fullmatch(r"\d+", value), f"{attribute}={value!r} is not an integer"
-            assert int(value) == expected, f"{attribute}={value} but {expected} such cases"
-            totals[attribute] += expected
-        for prop in suite.iter("property"):
-            properties[prop.get("name", "")] = prop.get("value", "")
-        cases.extend(suite_cases)
-    for attribute, expected in totals.items():
-        value = root.get(attribute)
-        if value is not None:
-            assert int(value) == expected, f"<testsuites {attribute}={value}> but {expected}"
-    assert suites, "no <testsuite> in the result file"
-    return ResultSummary(tuple(suites), tuple(cases), properties)
-
-
-def _case(node: etree._Element) -> CaseResult:
-    children = [child for child in node if child.tag in _OUTCOMES]
-    assert len(children) <= 1, f"test case with several outcomes: {[c.tag for c in children]}"
-    outcome = str(children[0].tag) if children else "passed"
-    message = children[0].get("message", "") if children else ""
-    text = (children[0].text or "") if children else ""
-    return CaseResult(node.get("classname", ""), node.get("name", ""), outcome, message, text)
-
-
-def own_result(path: Path, cases: Sequence[tuple[str, str, str]], classname: str = "C") -> bytes:
-    """A result file as a test writes it itself: ``(name, outcome, text)`` per case."""
-    root = etree.Element("testsuites")
-    suite = etree.SubElement(
-        root,
-        "testsuite",
-        name="own",
-        tests=str(len(cases)),
-        failures=str(sum(outcome == "failure" for _, outcome, _ in cases)),
-        errors=str(sum(outcome == "error" for _, outcome, _ in cases)),
-        skipped=str(sum(outcome == "skipped" for _, outcome, _ in cases)),
-    )
-    for name, outcome, text in cases:
-        case = etree.SubElement(suite, "testcase", classname=classname, name=name)
-        if outcome != "passed":
-            etree.SubElement(case, outcome, message=text).text = text
-    data = bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))
-    path.write_bytes(data)
-    return data
-
-
-# --- running the RUNNER ------------------------------------------------------------------
-
-
-def ament(
-    runner_script: str,
-    result: Path,
-    command: Sequence[str],
-    env: Mapping[str, str],
-    *options: str,
-    cwd: Path,
-    package: str = "pkg",
-) -> subprocess.CompletedProcess[str]:
-    """``python3 -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest runs it."""
-    args = [str(result), "--package-name", package, *options, "--command", *command]
-    return run_runner(runner_script, args, env, cwd=cwd)
 
 
 def sh(script: str, *args: str) -> list[str]:
     return ["sh", "-c", script, "sh", *args]
-
-
-def domain_of(stdout: str) -> int:
-    match = DOMAIN_LINE.search(stdout)
-    assert match, f"no 'Running with ROS_DOMAIN_ID' line in:\n{stdout}"
-    return int(match.group(1))
 
 
 # --- 1. stale result file, folder ----------------------------------------------------------

@@ -1,20 +1,22 @@
-"""The junit-10 checker rejects what Jenkins' xunit-plugin rejects (xunit-formats.md 5.1).
+"""The junit-10 checker rejects what Jenkins' xunit-plugin rejects, and only that.
 
 Without this the "valid here is valid there" tests elsewhere could pass with a checker
-that accepts anything.
+that accepts anything. The samples (tests/data/xunit) and the expected reasons run
+everywhere; the outside tier also validates every sample and every document below with
+the real junit-10.xsd (../shared/reference/xunit-schemas, CI only) and requires the same
+verdict from the checker.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
-import jenkins_junit10
 import pytest
-from conftest import REPO
+from helpers import capabilities, jenkins_junit10
 from lxml import etree
 
-SAMPLES = REPO.parent / "shared" / "reference" / "xunit-samples"
-pytestmark = pytest.mark.skipif(not SAMPLES.is_dir(), reason=f"no samples at {SAMPLES}")
+SAMPLES = Path(__file__).resolve().parent / "data" / "xunit"
 
 #: Samples junit-10 accepts as they are (section 5.1's table; pytest xunit2 without
 #: record_property, so without testcase <properties>).
@@ -111,7 +113,7 @@ def _recovered(path: Path) -> etree._Element:
 
 def test_every_sample_has_a_verdict() -> None:
     judged = set(ACCEPTED) | set(REJECTED) | set(NOT_WELL_FORMED)
-    assert judged == {path.name for path in SAMPLES.iterdir()}
+    assert judged == {path.name for path in SAMPLES.glob("*.xml")}
 
 
 @pytest.mark.parametrize("name", ACCEPTED)
@@ -149,44 +151,93 @@ def test_rejects_an_empty_file(tmp_path: Path) -> None:
 # --- synthetic documents: one rule each ------------------------------------------------------
 
 SUITE = '<testsuite name="s" tests="1" failures="0" errors="0"{attrs}>{body}</testsuite>'
+ONE_CASE = '<testcase name="c"/>'
 
 
-def _suite(body: str = '<testcase name="c"/>', attrs: str = "") -> list[str]:
-    return jenkins_junit10.rejections(etree.fromstring(SUITE.format(attrs=attrs, body=body)))
+def _suite_text(body: str = ONE_CASE, attrs: str = "") -> str:
+    return SUITE.format(attrs=attrs, body=body)
 
 
 def _doc(text: str) -> list[str]:
     return jenkins_junit10.rejections(etree.fromstring(text))
 
 
+def _suite(body: str = ONE_CASE, attrs: str = "") -> list[str]:
+    return _doc(_suite_text(body, attrs))
+
+
+PLAIN_VALID = (
+    '<testsuites name="all" time="1.5" tests="2" failures="1" errors="0">'
+    '<testsuite name="s" tests="2" failures="1" errors="0" skipped="0" time="1.5" '
+    'timestamp="2026-01-01T00:00:00" hostname="h" id="0" package="p" file="f" log="l" '
+    'url="u" group="g">'
+    '<properties><property name="k" value=""/></properties>'
+    '<testcase name="a" classname="C" time="0.5" group="g"/>'
+    '<testcase name="b" classname="C" time="whatever">'
+    '<failure message="m" type="T">text</failure><system-out>o</system-out>'
+    "<system-err>e</system-err></testcase>"
+    "<system-out>suite out</system-out><system-err>suite err</system-err>"
+    "</testsuite></testsuites>"
+)
+FREE_COUNTS = '<testsuite name="s" tests="x" failures="" errors="1.0"/>'
+ACCEPTED_TIMES = ("0", "0.", "1,234.5", "", "12.125", "1,234,567", "1234,567", ".5")
+REJECTED_TIMES = ("1e-05", "-1", " 1", "0,5", "NaN", "1.5s", "inf", "12.1234", "1,", "0.0001")
+REQUIRED = ("name", "tests", "failures", "errors")
+REJECTED_CONTENT = (
+    ('<testcase name="c" file="f.py"/>', "<testcase> has undeclared attribute 'file'"),
+    ('<testcase name="c"><failure kind="x"/></testcase>', "<failure> has undeclared"),
+    ('<testcase name="c"><properties/></testcase>', "<testcase> may not contain <prop"),
+    ('<testcase name="c"><foo/></testcase>', "<testcase> may not contain <foo>"),
+    ('<testcase name="c"><failure><b>x</b></failure></testcase>', "<failure> may not"),
+    ('<testcase name="c">stray text</testcase>', "<testcase> holds character data"),
+    ("<properties><property name='k'/></properties>", "lacks required attribute 'value'"),
+    ("<properties><property value='v'/></properties>", "lacks required attribute 'name'"),
+    ("<properties><foo/></properties>", "<properties> may not contain <foo>"),
+    ("<system-out><b>x</b></system-out>", "<system-out> may not contain <b>"),
+    ("stray text", "<testsuite> holds character data"),
+    ('<testcase name="c"><rerunFailure/></testcase>', "lacks required attribute 'type'"),
+    (
+        '<testcase name="c"><rerunFailure type="T"><system-out>o</system-out>'
+        "<stackTrace>s</stackTrace></rerunFailure></testcase>",
+        "<rerunFailure> children",
+    ),
+    ("<testcase/>", "<testcase> lacks required attribute 'name'"),
+)
+RERUN_WITH_TYPE = (
+    '<testcase name="c"><rerunFailure type="T" message="m">text<stackTrace>s</stackTrace>'
+    '<system-out>o</system-out></rerunFailure><flakyError type="T"/></testcase>'
+)
+COMMENTED = '\n  <!-- a docstring -->\n  <testcase name="c"><!-- c --></testcase>\n'
+OTHER_ROOTS = ("<testcase name='c'/>", "<report/>", '<x:testsuite xmlns:x="urn:x" name="s"/>')
+NAMESPACED_CHILD = '<testcase name="c"><x:failure xmlns:x="urn:x"/></testcase>'
+TESTSUITES_CONTENT = (
+    '<testsuites><testcase name="c"/></testsuites>',
+    "<testsuites><properties/></testsuites>",
+    '<testsuites skipped="0"/>',
+)
+
+
+def _without(attribute: str) -> str:
+    attrs = {"name": "s", "tests": "0", "failures": "0", "errors": "0"}
+    del attrs[attribute]
+    return "<testsuite " + " ".join(f'{k}="{v}"' for k, v in attrs.items()) + "/>"
+
+
 def test_a_plain_valid_document_is_accepted() -> None:
-    text = (
-        '<testsuites name="all" time="1.5" tests="2" failures="1" errors="0">'
-        '<testsuite name="s" tests="2" failures="1" errors="0" skipped="0" time="1.5" '
-        'timestamp="2026-01-01T00:00:00" hostname="h" id="0" package="p" file="f" log="l" '
-        'url="u" group="g">'
-        '<properties><property name="k" value=""/></properties>'
-        '<testcase name="a" classname="C" time="0.5" group="g"/>'
-        '<testcase name="b" classname="C" time="whatever">'
-        '<failure message="m" type="T">text</failure><system-out>o</system-out>'
-        "<system-err>e</system-err></testcase>"
-        "<system-out>suite out</system-out><system-err>suite err</system-err>"
-        "</testsuite></testsuites>"
-    )
-    assert _doc(text) == []
+    assert _doc(PLAIN_VALID) == []
 
 
 def test_counts_are_free_strings() -> None:
-    assert _doc('<testsuite name="s" tests="x" failures="" errors="1.0"/>') == []
+    assert _doc(FREE_COUNTS) == []
 
 
-@pytest.mark.parametrize("time", ["0", "0.", "1,234.5", "", "12.125", "1,234,567"])
+@pytest.mark.parametrize("time", ACCEPTED_TIMES)
 def test_surefire_time_accepted(time: str) -> None:
     assert _suite(attrs=f' time="{time}"') == []
     assert _doc(f'<testsuites time="{time}"/>') == []
 
 
-@pytest.mark.parametrize("time", ["1e-05", "-1", " 1", "0,5", "NaN", "1.5s", "inf"])
+@pytest.mark.parametrize("time", REJECTED_TIMES)
 def test_surefire_time_rejected(time: str) -> None:
     assert _suite(attrs=f' time="{time}"') == [
         f"<testsuite> time={time!r} does not match SUREFIRE_TIME"
@@ -198,79 +249,116 @@ def test_testcase_time_is_a_free_string() -> None:
     assert _suite('<testcase name="c" time="1e-05"/>') == []
 
 
-@pytest.mark.parametrize("attribute", ["name", "tests", "failures", "errors"])
+@pytest.mark.parametrize("attribute", REQUIRED)
 def test_testsuite_required_attributes(attribute: str) -> None:
-    attrs = {"name": "s", "tests": "0", "failures": "0", "errors": "0"}
-    del attrs[attribute]
-    text = "<testsuite " + " ".join(f'{k}="{v}"' for k, v in attrs.items()) + "/>"
-    assert _doc(text) == [f"<testsuite> lacks required attribute {attribute!r}"]
+    assert _doc(_without(attribute)) == [f"<testsuite> lacks required attribute {attribute!r}"]
 
 
 def test_testcase_needs_a_name_and_nothing_else() -> None:
     assert _suite("<testcase/>") == ["<testcase> lacks required attribute 'name'"]
-    assert _suite('<testcase name="c"/>') == []
+    assert _suite(ONE_CASE) == []
 
 
-@pytest.mark.parametrize(
-    ("body", "reason"),
-    [
-        ('<testcase name="c" file="f.py"/>', "<testcase> has undeclared attribute 'file'"),
-        ('<testcase name="c"><failure kind="x"/></testcase>', "<failure> has undeclared"),
-        ('<testcase name="c"><properties/></testcase>', "<testcase> may not contain <prop"),
-        ('<testcase name="c"><foo/></testcase>', "<testcase> may not contain <foo>"),
-        ('<testcase name="c"><failure><b>x</b></failure></testcase>', "<failure> may not"),
-        ('<testcase name="c">stray text</testcase>', "<testcase> holds character data"),
-        ("<properties><property name='k'/></properties>", "lacks required attribute 'value'"),
-        ("<properties><property value='v'/></properties>", "lacks required attribute 'name'"),
-        ("<properties><foo/></properties>", "<properties> may not contain <foo>"),
-        ("<system-out><b>x</b></system-out>", "<system-out> may not contain <b>"),
-        ("stray text", "<testsuite> holds character data"),
-        ('<testcase name="c"><rerunFailure/></testcase>', "lacks required attribute 'type'"),
-        (
-            '<testcase name="c"><rerunFailure type="T"><system-out>o</system-out>'
-            "<stackTrace>s</stackTrace></rerunFailure></testcase>",
-            "<rerunFailure> children",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("body", "reason"), REJECTED_CONTENT)
 def test_rejected_content(body: str, reason: str) -> None:
     found = _suite(body)
     assert any(reason in item for item in found), found
 
 
 def test_rerun_and_flaky_elements_with_type_are_accepted() -> None:
-    body = (
-        '<testcase name="c"><rerunFailure type="T" message="m">text<stackTrace>s</stackTrace>'
-        '<system-out>o</system-out></rerunFailure><flakyError type="T"/></testcase>'
-    )
-    assert _suite(body) == []
+    assert _suite(RERUN_WITH_TYPE) == []
 
 
 def test_nested_suites_are_allowed() -> None:
-    assert _suite(SUITE.format(attrs="", body='<testcase name="c"/>')) == []
+    assert _suite(_suite_text()) == []
 
 
 def test_testsuites_holds_only_testsuite_elements() -> None:
-    assert _doc('<testsuites><testcase name="c"/></testsuites>') == [
-        "<testsuites> may not contain <testcase>"
+    assert [_doc(text) for text in TESTSUITES_CONTENT] == [
+        ["<testsuites> may not contain <testcase>"],
+        ["<testsuites> may not contain <properties>"],
+        ["<testsuites> has undeclared attribute 'skipped'"],
     ]
-    assert _doc("<testsuites><properties/></testsuites>") == [
-        "<testsuites> may not contain <properties>"
-    ]
-    assert _doc('<testsuites skipped="0"/>') == ["<testsuites> has undeclared attribute 'skipped'"]
 
 
 def test_comments_and_whitespace_are_not_content() -> None:
-    assert _suite('\n  <!-- a docstring -->\n  <testcase name="c"><!-- c --></testcase>\n') == []
+    assert _suite(COMMENTED) == []
 
 
-@pytest.mark.parametrize(
-    "text", ["<testcase name='c'/>", "<report/>", '<x:testsuite xmlns:x="urn:x" name="s"/>']
-)
+@pytest.mark.parametrize("text", OTHER_ROOTS)
 def test_other_roots_are_rejected(text: str) -> None:
     assert _doc(text)[0].startswith("root <")
 
 
 def test_namespaced_elements_are_unknown() -> None:
-    found = _suite('<testcase name="c"><x:failure xmlns:x="urn:x"/></testcase>')
+    found = _suite(NAMESPACED_CHILD)
     assert found == ["<testcase> may not contain <{urn:x}failure>"]
+
+
+# --- the outside tier: the same verdicts from the real junit-10.xsd --------------------------
+
+#: Every synthetic document above, each judged by the checker in one of the tests above.
+SYNTHETIC: tuple[str, ...] = (
+    PLAIN_VALID,
+    FREE_COUNTS,
+    *(_suite_text(attrs=f' time="{time}"') for time in ACCEPTED_TIMES + REJECTED_TIMES),
+    *(f'<testsuites time="{time}"/>' for time in ACCEPTED_TIMES + REJECTED_TIMES),
+    _suite_text('<testcase name="c" time="1e-05"/>'),
+    *(_without(attribute) for attribute in REQUIRED),
+    _suite_text(),
+    *(_suite_text(body) for body, _ in REJECTED_CONTENT),
+    _suite_text(RERUN_WITH_TYPE),
+    _suite_text(_suite_text()),
+    *TESTSUITES_CONTENT,
+    _suite_text(COMMENTED),
+    *OTHER_ROOTS,
+    _suite_text(NAMESPACED_CHILD),
+)
+
+#: Documents the schema accepts and the checker rejects on purpose: not a suite root.
+SUITE_ROOTS_ONLY = frozenset({"<testcase name='c'/>"})
+
+
+@pytest.fixture(scope="module")
+def junit10_xsd() -> Iterator[etree.XMLSchema]:
+    """The real schema Jenkins' xunit-plugin validates "JUnit" input with."""
+    capabilities.require(capabilities.OUTSIDE)
+    parser = etree.XMLParser(resolve_entities=False, no_network=True)
+    yield etree.XMLSchema(etree.parse(str(capabilities.JENKINS_JUNIT10_XSD), parser))
+
+
+def _verdicts(schema: etree.XMLSchema, root: etree._Element) -> tuple[bool, bool]:
+    """(the real schema accepts, the checker accepts) for one document."""
+    return schema.validate(root), jenkins_junit10.accepts(root)
+
+
+@capabilities.OUTSIDE
+@pytest.mark.parametrize("name", sorted(set(ACCEPTED) | set(REJECTED) | set(NOT_WELL_FORMED)))
+def test_real_junit10_gives_each_sample_the_same_verdict(
+    junit10_xsd: etree.XMLSchema, name: str
+) -> None:
+    """Files that are not well-formed are compared on what recovery reads of them."""
+    schema, checker = _verdicts(junit10_xsd, _recovered(SAMPLES / name))
+    assert schema == checker, f"{name}: junit-10.xsd {schema}, checker {checker}"
+    assert schema == (name in ACCEPTED or name == "launch_testing_junitxml_ctrlchar_INVALID.xml")
+
+
+@capabilities.OUTSIDE
+@pytest.mark.parametrize("text", SYNTHETIC)
+def test_real_junit10_gives_each_synthetic_document_the_same_verdict(
+    junit10_xsd: etree.XMLSchema, text: str
+) -> None:
+    """Except one deliberate difference: the schema declares every element global, so a
+    lone ``<testcase>`` validates; the checker accepts only suite roots as a result file."""
+    schema, checker = _verdicts(junit10_xsd, etree.fromstring(text))
+    if text in SUITE_ROOTS_ONLY:
+        assert (schema, checker) == (True, False), text
+    else:
+        assert schema == checker, f"junit-10.xsd {schema}, checker {checker}: {text}"
+
+
+@capabilities.OUTSIDE
+def test_control_the_real_schema_rejects_and_accepts(junit10_xsd: etree.XMLSchema) -> None:
+    """The comparisons above can fail: the schema really judges (it is not accept-all)."""
+    assert junit10_xsd.validate(etree.fromstring(PLAIN_VALID))
+    assert not junit10_xsd.validate(etree.fromstring(_without("errors")))

@@ -9,10 +9,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from conftest import run_cli
+from helpers.commands import run_cli
 from lxml import etree
 
-SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "reference" / "xunit-samples"
+SAMPLES = Path(__file__).resolve().parent / "data" / "xunit"
 RESULTS = Path("build/pkg_a/test_results/pkg_a")
 LINE = re.compile(r"^(?P<path>.+): (\d+) tests, (\d+) errors, (\d+) failures, (\d+) skipped$")
 SUMMARY = re.compile(r"^Summary: (\d+) tests, (\d+) errors, (\d+) failures, (\d+) skipped$")

@@ -18,12 +18,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from conftest import _POLICY_VARS, BIN, REPO, run_cli, run_runner
+from helpers.commands import BIN, POLICY_VARS, REPO, run_cli, run_runner
 from lxml import etree
 
 from ros_isolated_test.xunit import validate
 
-SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "reference" / "xunit-samples"
+SAMPLES = Path(__file__).resolve().parent / "data" / "xunit"
 SAMPLE_NAMES = sorted(path.name.removesuffix(".xml") for path in SAMPLES.glob("*.xml"))
 COLCON = BIN / "colcon"
 XUNIT_VIEWER = REPO / "node_modules" / ".bin" / "xunit-viewer"
@@ -99,7 +99,7 @@ class Folder:
 @pytest.fixture(scope="module")
 def module_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     """The ``env`` fixture's environment, for the one folder all tests here share."""
-    clean = {key: value for key, value in os.environ.items() if key not in _POLICY_VARS}
+    clean = {key: value for key, value in os.environ.items() if key not in POLICY_VARS}
     clean["ROS_ISOLATED_TEST_LOCK_DIR"] = str(tmp_path_factory.mktemp("locks"))
     clean["PATH"] = f"{BIN}{os.pathsep}{clean.get('PATH', '')}"
     return clean
