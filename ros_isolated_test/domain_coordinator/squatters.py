@@ -14,6 +14,8 @@ import pwd
 import re
 import time
 
+from ros_isolated_test.process import proc
+
 _VARIABLE = b"ROS_DOMAIN_ID="
 #: Compiled on first use (re's cache): most scans find no variable to read.
 _LEADING_NUMBER = r"\s*(0[xX][0-9a-fA-F]+|[0-9]+)"
@@ -55,24 +57,14 @@ def ancestors(pid: int, limit: int = 64) -> set[int]:
     found: set[int] = set()
     current = pid
     for _ in range(limit):
-        try:
-            with open(f"/proc/{current}/stat", "rb") as handle:
-                data = handle.read()
-            current = int(data[data.rfind(b")") + 2 :].split()[1])
-        except (OSError, ValueError, IndexError):
+        stat = proc.read_stat(current)
+        if stat is None:
             break
+        current = stat.ppid
         if current <= 1 or current in found:
             break
         found.add(current)
     return found
-
-
-def _boot_time() -> float:
-    with contextlib.suppress(OSError, ValueError), open("/proc/stat", "rb") as handle:
-        for line in handle:
-            if line.startswith(b"btime "):
-                return float(line.split()[1])
-    return 0.0
 
 
 def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
@@ -83,14 +75,11 @@ def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
     """
     found: dict[int, list[Squatter]] = {}
     me = str(os.getpid())
-    try:
-        entries = [name for name in os.listdir("/proc") if name.isdigit() and name != me]
-    except OSError:
-        return found
     boot: float | None = None
-    ticks = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-    for name in entries:
-        environ = _environ(name)
+    for name in proc.pids():
+        if name == me:
+            continue
+        environ = proc.environ(name)
         start = environ.find(_VARIABLE)
         while start > 0 and environ[start - 1] != 0:
             start = environ.find(_VARIABLE, start + 1)
@@ -102,43 +91,17 @@ def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
         if domain is None or (domains is not None and domain not in domains):
             continue
         if boot is None:
-            boot = _boot_time()
-        found.setdefault(domain, []).append(_describe(name, domain, boot, ticks))
+            boot = proc.boot_time()
+        found.setdefault(domain, []).append(_describe(name, domain, boot))
     return found
 
 
-def _environ(pid: str) -> bytes:
-    """A process's environment block; empty when it is gone or not ours to read.
-
-    Bare descriptors, no file objects: this runs for every process on the machine,
-    once per reservation.
-    """
-    try:
-        fd = os.open(f"/proc/{pid}/environ", os.O_RDONLY | os.O_CLOEXEC)
-    except OSError:
-        return b""
-    try:
-        chunks: list[bytes] = []
-        while chunk := os.read(fd, 65536):
-            chunks.append(chunk)
-    except OSError:
-        return b""
-    finally:
-        os.close(fd)
-    return b"".join(chunks)
-
-
-def _describe(pid: str, domain: int, boot: float, ticks: int) -> Squatter:
-    user, command, started = "?", "?", 0.0
+def _describe(pid: str, domain: int, boot: float) -> Squatter:
+    user, started = "?", 0.0
     with contextlib.suppress(OSError, KeyError):
         user = pwd.getpwuid(os.stat(f"/proc/{pid}").st_uid).pw_name
-    with contextlib.suppress(OSError):
-        with open(f"/proc/{pid}/cmdline", "rb") as handle:
-            raw = handle.read().rstrip(b"\0")
-        command = raw.replace(b"\0", b" ").decode("utf-8", "replace") or "?"
-    with contextlib.suppress(OSError, ValueError, IndexError):
-        with open(f"/proc/{pid}/stat", "rb") as handle:
-            data = handle.read()
-        fields = data[data.rfind(b")") + 2 :].split()
-        started = boot + int(fields[19]) / ticks
+    command = proc.cmdline(pid) or "?"
+    stat = proc.read_stat(pid)
+    if stat is not None:
+        started = proc.started_at(stat, boot)
     return Squatter(int(pid), domain, user, command, started or time.time())

@@ -2,26 +2,31 @@
 
 An ID is in use when a runner holds its lock, when something binds its TCP port
 (upstream's ``domain_coordinator``, another program), or when a live process carries
-it in ROS_DOMAIN_ID (a test that outlived its runner, a shell's export): a squatter.
+it in ROS_DOMAIN_ID (a test that outlived its runner, a shell's export): a squatter,
+or while a block record names a live survivor of its last test (one the runner could
+not end).
+Runners waiting for an ID (their tickets in the queue) are listed apart.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import pwd
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
-from ros_isolated_test.domain_coordinator.reservation import probe_lock
+from ros_isolated_test.domain_coordinator import holder, port_guard, queue, squatters
+from ros_isolated_test.domain_coordinator.reservation import blocking_survivors, probe_lock
+from ros_isolated_test.process import proc
 
 _LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
 
 
 @dataclass(frozen=True)
 class HeldDomain:
-    """One ID in use: ``via`` is ``lock`` (a runner), ``port`` or ``environment``."""
+    """One ID in use: ``via`` is ``lock`` (a runner), ``port``, ``environment`` or ``survivor``."""
 
     domain_id: int
     via: str
@@ -68,7 +73,29 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                     ),
                 )
             )
+        for survivor in blocking_survivors(lock_dir, domain_id):
+            held.append(HeldDomain(domain_id, "survivor", _survivor(domain_id, survivor)))
     return held
+
+
+def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
+    """A survivor of the ID's last test, described like a holder."""
+    user = "?"
+    with contextlib.suppress(OSError, KeyError):
+        user = pwd.getpwuid(os.stat(f"/proc/{survivor.pid}").st_uid).pw_name
+    return holder.Holder(
+        domain_id=domain_id,
+        pid=survivor.pid,
+        user=user,
+        command=proc.cmdline(survivor.pid) or f"({survivor.name})",
+        started=proc.started_at(survivor),
+        host="",
+    )
+
+
+def waiting_runners(lock_dir: Path) -> list[queue.Waiter]:
+    """Runners queued for an ID (first come, first served), the next to get one first."""
+    return queue.Queue(lock_dir).waiters()
 
 
 def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> str:
@@ -78,7 +105,7 @@ def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> s
     items = [item for item in held_domains(lock_dir, pool) if item.domain_id in wanted]
     for item in items[:limit]:
         if item.holder is not None:
-            kind = "squatter " if item.via == "environment" else ""
+            kind = {"environment": "squatter ", "survivor": "survivor "}.get(item.via, "")
             parts.append(
                 f"{item.domain_id}: {kind}pid {item.holder.pid} ({item.holder.user}) "
                 f"{item.holder.command[:60]}"

@@ -4,8 +4,11 @@ The test stays in the runner's process group, as a shell's foreground job does, 
 may read a terminal's stdin without being stopped by SIGTTIN and a terminal's Ctrl-C
 reaches it directly. The runner is a child subreaper: every process the test starts
 stays in its tree, and none outlives the run. When the test's main process ends, for
-any reason, what is left of the tree gets SIGTERM, then SIGKILL after a grace period,
-and only then does the caller release the domain ID.
+any reason, what is left of the tree gets SIGTERM and a grace period to exit; then the
+tree is frozen (SIGSTOP until no process of it runs: a stopped process cannot fork)
+and SIGKILLed until it is empty. Only then does the caller release the domain ID, and
+a process that outlives even that (one we may not signal, one stuck in the kernel) is
+reported as a survivor, for the caller to keep the ID blocked while it lives.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import signal
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
-from ros_isolated_test.process import reaper, tree
+from ros_isolated_test.process import proc, reaper, tree
 from ros_isolated_test.process.capture import OutputCapture
 
 TYPE_CHECKING = False  # no typing import on a test's path
@@ -40,6 +43,16 @@ FORWARDED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 STATUS_LOST = 255
 #: Reset to their default in the test: Python ignores SIGPIPE, and so would the test.
 _DEFAULT_IN_TEST = (signal.SIGPIPE, signal.SIGXFSZ)
+#: How often the tree is looked at while leftovers have their grace period.
+TERM_POLL_SECONDS = 0.05
+#: SIGSTOP sweeps give up on processes that do not stop within this (stuck in the
+#: kernel): the SIGKILL passes that follow still reach them.
+FREEZE_LIMIT_SECONDS = 2.0
+#: SIGKILL passes stop once the tree has not shrunk for this long: what is left cannot
+#: be killed by us, and must not hang the runner.
+KILL_STALL_SECONDS = 2.0
+#: At most this many leftovers are named one by one (a forking daemon makes hundreds).
+NAMED_LIMIT = 100
 
 
 class Outcome:
@@ -51,6 +64,7 @@ class Outcome:
         "received_signal",
         "returncode",
         "start_error",
+        "survivors",
         "timed_out",
     )
 
@@ -62,6 +76,7 @@ class Outcome:
         start_error: OSError | None = None,
         received_signal: int | None = None,
         leftovers: tuple[str, ...] = (),
+        survivors: tuple[proc.Stat, ...] = (),
     ) -> None:
         self.returncode = returncode
         self.duration = duration
@@ -71,6 +86,9 @@ class Outcome:
         self.received_signal = received_signal
         #: Processes of the test still alive after its main process ended, then stopped.
         self.leftovers = leftovers
+        #: Processes of the test that even SIGKILL did not end (not ours to signal, stuck
+        #: in the kernel): alive after the run, so the caller keeps the ID blocked.
+        self.survivors = survivors
 
     @property
     def signal(self) -> int | None:
@@ -105,10 +123,11 @@ def restore_handlers(previous: dict[int, Handler]) -> None:
 class _Signals:
     """Signal handlers for the test's lifetime: pass the signal on, remember it."""
 
-    def __init__(self) -> None:
+    def __init__(self, others: frozenset[tuple[int, int]]) -> None:
         self.received: int | None = None
         self.at: float | None = None
         self._previous: dict[int, Handler] = {}
+        self._others = others
 
     def __enter__(self) -> _Signals:
         self._previous = set_handlers(self._forward)
@@ -120,7 +139,7 @@ class _Signals:
     def _forward(self, signum: int, _frame: FrameType | None) -> None:
         if self.received is None:
             self.received, self.at = signum, time.monotonic()
-        targets = tree.descendants(os.getpid())
+        targets = tree.descendants(os.getpid(), skip=self._others)
         if signum == signal.SIGINT and _from_terminal():
             # The terminal already sent it to our process group: only processes that
             # left the group (setsid daemons) still need it, and only once.
@@ -299,8 +318,9 @@ def run(
     """Run ``command`` to its end and its tree's end, streaming its output into ``capture``."""
     reaper.become_subreaper()
     start = time.monotonic()
+    others = _others()
     # Handlers before the test exists: a signal arriving as it starts must reach it too.
-    with _child_statuses_kept(), _Signals() as signals:
+    with _child_statuses_kept(), _Signals(others) as signals:
         try:
             test = _Test(command, env)
         except OSError as error:
@@ -315,10 +335,10 @@ def run(
                 # Whatever went wrong in the runner, the test must not outlive it unseen.
                 tree.signal_tree(test.pid, signal.SIGKILL)
                 test.wait()
-                _end_leftovers(0.0)
+                _end_leftovers(0.0, others)
                 raise
             returncode = test.wait()
-            leftovers = _end_leftovers(kill_grace)
+            leftovers, survived = _end_leftovers(kill_grace, others)
             _drain(test, capture)
             if test.status_lost:
                 capture.note(
@@ -334,6 +354,7 @@ def run(
         timed_out=timed_out,
         received_signal=signals.received,
         leftovers=leftovers,
+        survivors=survived,
     )
 
 
@@ -408,35 +429,147 @@ def _signal(test: _Test, signum: int) -> None:
         tree.signal_tree(test.pid, signum)
 
 
-def _end_leftovers(grace: float) -> tuple[str, ...]:
-    """SIGTERM what is left of the test's tree, SIGKILL it after ``grace``; reap it all.
+def _others() -> frozenset[tuple[int, int]]:
+    """Processes in our tree before the test starts: a program embedding the runner's own.
 
-    Returns a description of each process that had to be stopped.
+    They are not the test's, and are never signalled. A runner started from a shell has
+    no child yet: one system call, no /proc scan.
+    """
+    if not reaper.has_children():
+        return frozenset()
+    return frozenset(process.key for process in tree.descendants(os.getpid()))
+
+
+def survivors() -> list[proc.Stat]:
+    """Living processes in this runner's tree: after a run, what even SIGKILL did not end.
+
+    The runner starts nothing but the test, so, as a subreaper, all it has left in its
+    tree is the test's. One system call when nothing is left.
     """
     reaper.reap_orphans()
     if not reaper.has_children():
-        # Every living descendant has a living child of ours above it (orphans are
-        # re-parented to us, the subreaper): none at all means nothing is left.
-        return ()
-    me = os.getpid()
-    leftovers = tree.descendants(me)
-    if not leftovers:
+        return []
+    return tree.descendants(os.getpid())
+
+
+class _Sweep:
+    """The test's tree as the final sweep sees it, pass after pass, and all it has seen."""
+
+    def __init__(self, others: frozenset[tuple[int, int]]) -> None:
+        self.me = os.getpid()
+        self.others = others
+        #: Every process met, by (pid, start time): the leftovers to name.
+        self.seen: dict[tuple[int, int], proc.Stat] = {}
+
+    def look(self) -> tuple[list[proc.Stat], list[proc.Stat]]:
+        """Reap, then the living tree and the processes in it not met before."""
         reaper.reap_orphans()
-        return ()
-    tree.signal_all(leftovers, signal.SIGTERM)
-    deadline = time.monotonic() + grace
-    while time.monotonic() < deadline:
+        if not reaper.has_children():
+            # Every living descendant has a living child of ours above it (orphans are
+            # re-parented to us, the subreaper): none at all means nothing is left.
+            return [], []
+        current = tree.descendants(self.me, skip=self.others)
+        new = [process for process in current if process.key not in self.seen]
+        for process in new:
+            self.seen[process.key] = process
+        return current, new
+
+    def empty(self, current: list[proc.Stat]) -> bool:
+        """Whether the tree is gone for sure, not only missing from one racy pass."""
+        if current:
+            return False
         reaper.reap_orphans()
-        if not tree.descendants(me):
-            break
-        time.sleep(0.05)
-    else:
-        tree.signal_all(tree.descendants(me), signal.SIGKILL)
-        while tree.descendants(me) and time.monotonic() < deadline + 5:
-            reaper.reap_orphans()
-            time.sleep(0.02)
+        return not reaper.has_children() or not _children_left(self.me, self.others)
+
+    def terminate(self, grace: float) -> list[proc.Stat]:
+        """SIGTERM every process (SIGCONT too, so a stopped one can act on it), for ``grace``.
+
+        Processes forked meanwhile get the same. Returns what is still alive after it.
+        """
+        current, new = self.look()
+        deadline = time.monotonic() + grace
+        while True:
+            tree.signal_all(new, signal.SIGTERM)
+            tree.signal_all(new, signal.SIGCONT)
+            remaining = deadline - time.monotonic()
+            if self.empty(current) or remaining <= 0:
+                return current
+            time.sleep(min(TERM_POLL_SECONDS, remaining))
+            current, new = self.look()
+
+    def freeze(self) -> None:
+        """SIGSTOP the tree until a pass finds none of it running.
+
+        A stopped process cannot fork, so the SIGKILL passes that follow are no race
+        against children born meanwhile. Processes we may not signal, and ones that do
+        not stop within :data:`FREEZE_LIMIT_SECONDS`, are left to those passes.
+        """
+        refused: set[tuple[int, int]] = set()
+        give_up = time.monotonic() + FREEZE_LIMIT_SECONDS
+        delay = 0.001
+        while True:
+            current, _new = self.look()
+            running = [
+                process
+                for process in current
+                if process.state not in proc.STOPPED_STATES and process.key not in refused
+            ]
+            if not running or time.monotonic() >= give_up:
+                return
+            refused.update(process.key for process in tree.signal_all(running, signal.SIGSTOP))
+            time.sleep(delay)
+            delay = min(delay * 2, TERM_POLL_SECONDS)
+
+    def kill(self) -> list[proc.Stat]:
+        """SIGKILL the tree, pass after pass, reaping as it goes, until it is empty.
+
+        Ends when :data:`KILL_STALL_SECONDS` pass without the tree shrinking: what is
+        left then cannot be killed by us. Returns it.
+        """
+        fewest: int | None = None
+        progress_at = time.monotonic()
+        delay = 0.001
+        while True:
+            current, _new = self.look()
+            if self.empty(current):
+                return []
+            if fewest is None or len(current) < fewest:
+                fewest, progress_at = len(current), time.monotonic()
+            elif time.monotonic() - progress_at >= KILL_STALL_SECONDS:
+                return current
+            tree.signal_all(current, signal.SIGKILL)
+            time.sleep(delay)
+            delay = min(delay * 2, TERM_POLL_SECONDS)
+
+
+def _children_left(me: int, others: frozenset[tuple[int, int]]) -> bool:
+    """Whether a child of ours, other than the embedding program's, still exists."""
+    return any(process.ppid == me and process.key not in others for process in tree.processes())
+
+
+def _end_leftovers(
+    grace: float, others: frozenset[tuple[int, int]] = frozenset()
+) -> tuple[tuple[str, ...], tuple[proc.Stat, ...]]:
+    """End what is left of the test's tree; name what had to be ended, and what survived.
+
+    SIGTERM first, and ``grace`` seconds to exit cleanly (a well-behaved daemon gets its
+    chance); then freeze and SIGKILL until the tree is empty, or nothing more dies.
+    """
+    sweep = _Sweep(others)
+    remaining = sweep.terminate(grace)
+    if not sweep.seen:
+        return (), ()
+    left: list[proc.Stat] = []
+    if not sweep.empty(remaining):
+        sweep.freeze()
+        left = sweep.kill()
     reaper.reap_orphans()
-    return tuple(f"{item.pid} ({item.name})" for item in leftovers)
+    alive = {process.key for process in left}
+    ended = [process for key, process in sweep.seen.items() if key not in alive]
+    named = [process.describe() for process in ended[:NAMED_LIMIT]]
+    if len(ended) > NAMED_LIMIT:
+        named.append(f"... and {len(ended) - NAMED_LIMIT} more")
+    return tuple(named), tuple(left)
 
 
 def _drain(test: _Test, capture: OutputCapture) -> None:

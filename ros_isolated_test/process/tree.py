@@ -8,69 +8,61 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Container
 
+from ros_isolated_test.process import proc
 
-class Process:
-    """One process as /proc shows it."""
-
-    __slots__ = ("name", "pgid", "pid", "ppid", "state")
-
-    def __init__(self, pid: int, ppid: int, pgid: int, state: str, name: str) -> None:
-        self.pid = pid
-        self.ppid = ppid
-        self.pgid = pgid
-        self.state = state
-        self.name = name
-
-    def __repr__(self) -> str:
-        return f"Process({self.pid}, {self.name!r}, state={self.state})"
-
-
-def _read(pid: str) -> Process | None:
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as handle:
-            data = handle.read()
-    except OSError:
-        return None
-    # The command name may hold spaces and parentheses: fields follow the last ')'.
-    close = data.rfind(b")")
-    fields = data[close + 2 :].split()
-    if len(fields) < 3:
-        return None
-    name = data[data.find(b"(") + 1 : close].decode("utf-8", "replace")
-    return Process(int(pid), int(fields[1]), int(fields[2]), fields[0].decode(), name)
+#: A process of the tree: its stat line (pid, ppid, pgid, state, name, start time).
+Process = proc.Stat
 
 
 def processes() -> list[Process]:
     """Every process we can see."""
     found: list[Process] = []
-    with contextlib.suppress(OSError):
-        for entry in os.scandir("/proc"):
-            if entry.name.isdigit() and (process := _read(entry.name)) is not None:
-                found.append(process)
+    for pid in proc.pids():
+        if (process := proc.read_stat(pid)) is not None:
+            found.append(process)
     return found
 
 
-def descendants(pid: int, living_only: bool = True) -> list[Process]:
-    """Every descendant of ``pid``, parents before children; zombies left out by default."""
+def descendants(
+    pid: int, living_only: bool = True, skip: Container[tuple[int, int]] = ()
+) -> list[Process]:
+    """Every descendant of ``pid``, parents before children; zombies left out by default.
+
+    Processes whose :attr:`~proc.Stat.key` is in ``skip`` are left out with their own
+    descendants (what a program embedding the runner started before the test).
+    """
     children: dict[int, list[Process]] = {}
     for process in processes():
-        children.setdefault(process.ppid, []).append(process)
+        if process.key not in skip:
+            children.setdefault(process.ppid, []).append(process)
     found: list[Process] = []
     queue = list(children.get(pid, ()))
-    while queue:
-        current = queue.pop(0)
-        if not living_only or current.state != "Z":
+    index = 0
+    while index < len(queue):  # breadth first: parents before children
+        current = queue[index]
+        index += 1
+        if not living_only or current.alive:
             found.append(current)
         queue.extend(children.get(current.pid, ()))
     return found
 
 
-def signal_all(targets: list[Process], signum: int) -> None:
-    """Send ``signum`` to each target; processes already gone are skipped."""
+def signal_all(targets: list[Process], signum: int) -> list[Process]:
+    """Send ``signum`` to each target; the ones we may not signal (EPERM) are returned.
+
+    Processes already gone are skipped.
+    """
+    refused: list[Process] = []
     for target in targets:
-        with contextlib.suppress(ProcessLookupError, PermissionError):
+        try:
             os.kill(target.pid, signum)
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            refused.append(target)
+    return refused
 
 
 def signal_tree(pid: int, signum: int) -> None:

@@ -1,0 +1,156 @@
+"""The one /proc reader (``process.proc``) against real processes.
+
+Every other module (the supervisor's tree walk, the squatter scan, block records)
+trusts what it parses: a wrong field here is a wrong PID signalled or a survivor missed.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from ros_isolated_test.process import proc, tree
+
+#: Only stops a hung test.
+DEADLINE = 60.0
+#: A kernel command name with the characters that break naive parsing: spaces, ( and ).
+AWKWARD_NAME = "a) b (c)) d"
+
+
+def _wait_for(predicate: object, what: str) -> None:
+    """Poll until ``predicate()`` is true; fail naming ``what`` after the deadline."""
+    assert callable(predicate)
+    deadline = time.monotonic() + DEADLINE
+    while not predicate():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def sleeper(tmp_path: Path) -> Iterator[subprocess.Popen[bytes]]:
+    """A child whose executable (so whose kernel name) is :data:`AWKWARD_NAME`."""
+    sleep = shutil.which("sleep")
+    assert sleep is not None
+    awkward = tmp_path / AWKWARD_NAME
+    shutil.copy(sleep, awkward)
+    child = subprocess.Popen([str(awkward), "600", "0"], env={"MARKER": "one two", "X": "y"})
+    try:
+        _wait_for(lambda: proc.cmdline(child.pid).startswith(str(awkward)), "the exec")
+        yield child
+    finally:
+        child.kill()
+        child.wait(DEADLINE)
+
+
+def test_stat_of_a_name_with_spaces_and_parentheses(
+    sleeper: subprocess.Popen[bytes],
+) -> None:
+    stat = proc.read_stat(sleeper.pid)
+    assert stat is not None
+    assert stat.name == AWKWARD_NAME
+    assert (stat.pid, stat.ppid, stat.pgid) == (sleeper.pid, os.getpid(), os.getpgrp())
+    assert stat.alive
+    me = proc.read_stat(os.getpid())
+    assert me is not None
+    # Started after us: its start tick is not before ours (ticks, not wall-clock).
+    assert stat.start >= me.start
+    assert stat.describe() == f"{sleeper.pid} ({AWKWARD_NAME})"
+
+
+def test_the_state_follows_stop_continue_and_exit(sleeper: subprocess.Popen[bytes]) -> None:
+    def state() -> str:
+        stat = proc.read_stat(sleeper.pid)
+        assert stat is not None
+        return stat.state
+
+    _wait_for(lambda: state() == "S", "sleep to sleep")
+    os.kill(sleeper.pid, signal.SIGSTOP)
+    _wait_for(lambda: state() in proc.STOPPED_STATES, "the stop")
+    os.kill(sleeper.pid, signal.SIGCONT)
+    _wait_for(lambda: state() not in proc.STOPPED_STATES, "the continue")
+    stat = proc.read_stat(sleeper.pid)
+    assert stat is not None
+    assert proc.is_running(sleeper.pid, stat.start)
+    os.kill(sleeper.pid, signal.SIGKILL)
+    # Not reaped yet: a zombie, which runs no more and so is no survivor.
+    _wait_for(lambda: state() == "Z", "the zombie")
+    zombie = proc.read_stat(sleeper.pid)
+    assert zombie is not None and not zombie.alive
+    assert not proc.is_running(sleeper.pid, stat.start)
+    sleeper.wait(DEADLINE)
+    assert proc.read_stat(sleeper.pid) is None
+    assert not proc.is_running(sleeper.pid, stat.start)
+
+
+def test_a_pid_with_another_start_time_is_another_process(
+    sleeper: subprocess.Popen[bytes],
+) -> None:
+    """What a recycled PID looks like: same number, later start."""
+    stat = proc.read_stat(sleeper.pid)
+    assert stat is not None
+    assert proc.is_running(sleeper.pid, stat.start)
+    assert not proc.is_running(sleeper.pid, stat.start - 1)
+    assert not proc.is_running(sleeper.pid, stat.start + 1)
+
+
+def test_environ_cmdline_and_pids(sleeper: subprocess.Popen[bytes], tmp_path: Path) -> None:
+    assert proc.environ(sleeper.pid).split(b"\0")[:2] == [b"MARKER=one two", b"X=y"]
+    assert proc.cmdline(sleeper.pid) == f"{tmp_path / AWKWARD_NAME} 600 0"
+    found = proc.pids()
+    assert str(sleeper.pid) in found and str(os.getpid()) in found
+    assert all(name.isdigit() for name in found)
+
+
+def test_gone_processes_read_as_empty() -> None:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait(DEADLINE)
+    assert proc.read_stat(child.pid) is None
+    assert proc.environ(child.pid) == b""
+    assert proc.cmdline(child.pid) == ""
+
+
+def test_started_at_is_when_the_process_started() -> None:
+    before = time.time()
+    child = subprocess.Popen(["sleep", "600"])
+    try:
+        stat = proc.read_stat(child.pid)
+        assert stat is not None
+        started = proc.started_at(stat)
+    finally:
+        child.kill()
+        child.wait(DEADLINE)
+    # btime is whole seconds and ticks are 1/100 s: within a second or two of the truth.
+    assert before - 2 <= started <= time.time() + 2
+
+
+@pytest.mark.parametrize(
+    "line",
+    [b"", b"12 (name", b"12 name) S 1", b"12 (x) S 1 2 3", b"12 (x) S one 2" + b" 0" * 30],
+)
+def test_a_line_that_is_no_stat_line_is_refused(line: bytes) -> None:
+    assert proc.parse_stat(12, line) is None
+
+
+def test_identity_of_this_boot_and_namespace() -> None:
+    assert len(proc.boot_id()) == 36  # a UUID
+    assert proc.pid_namespace().startswith("pid:[")
+    assert proc.boot_time() > 0
+
+
+def test_the_tree_uses_the_same_reader(sleeper: subprocess.Popen[bytes]) -> None:
+    """tree.descendants finds the child by its parent link, under its awkward name."""
+    found = {process.pid: process for process in tree.descendants(os.getpid())}
+    assert found[sleeper.pid].name == AWKWARD_NAME
+    stat = proc.read_stat(sleeper.pid)
+    assert stat is not None
+    skipped = tree.descendants(os.getpid(), skip={stat.key})
+    assert sleeper.pid not in {process.pid for process in skipped}
