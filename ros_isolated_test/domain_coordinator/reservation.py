@@ -426,7 +426,7 @@ class DomainCoordinator:
             raise PoolExhaustedError(self._exhausted("", 0.0))
         start = time.monotonic()
         told = 0.0
-        with queue.ticket() as ticket:
+        with queue.ticket(command) as ticket:
             while True:
                 waited = time.monotonic() - start
                 ahead = ticket.ahead() if ticket is not None else 0
