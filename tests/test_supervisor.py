@@ -372,21 +372,10 @@ def test_planted_block_files_are_never_followed(
 # -- a survivor for real: a setuid-root process a runner run as nobody may not signal ----------
 
 
-def _setuid_capable(folder: Path) -> str | None:
-    if os.statvfs(folder).f_flag & os.ST_NOSUID:
-        return f"{folder} is mounted nosuid: a setuid helper there would not become root"
-    if shutil.which("gcc") is None:
-        return "needs gcc to build the setuid helper"
-    return None
-
-
 @pytest.fixture
 def survivor_setup(traversable_dir: Path, env: dict[str, str]) -> tuple[Path, Path, dict[str, str]]:
     """A setuid-root helper, a lock directory nobody can use, and the environment for it."""
-    capabilities.require(capabilities.OTHER_USERS)
-    missing = _setuid_capable(traversable_dir)
-    if missing is not None:
-        capabilities.require(capabilities.Capability("setuid-helper", lambda: missing))
+    capabilities.require(capabilities.OTHER_USERS, capabilities.SETUID_HELPER)
     source = traversable_dir / "setuid_helper.c"
     source.write_text(SETUID_HELPER)
     helper = traversable_dir / "setuid_helper"

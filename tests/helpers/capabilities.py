@@ -46,9 +46,7 @@ class Capability:
     @property
     def mark(self) -> pytest.MarkDecorator:
         """``skipif`` with the reason, for a test, a class or ``pytestmark``."""
-        return pytest.mark.skipif(
-            self.missing is not None, reason=f"[{self.name}] {self.missing}"
-        )
+        return pytest.mark.skipif(self.missing is not None, reason=f"[{self.name}] {self.missing}")
 
     def __call__(self, function: Callable[..., object]) -> Callable[..., object]:
         """Used bare as a decorator: ``@capabilities.ROOT``."""
@@ -93,9 +91,14 @@ def _mount_namespace() -> str | None:
         return f"mounting a private file system {missing}"
     if shutil.which("unshare") is None:
         return "needs unshare(1) from util-linux (scripts/setup.sh installs it)"
-    failed = _run_ok(["unshare", "--mount", "--propagation", "private", "true"])
+    import tempfile
+
+    # What the tests do in it: mount a tmpfs, which a container may forbid even to root.
+    with tempfile.TemporaryDirectory() as where:
+        command = ["unshare", "--mount", "--propagation", "private"]
+        failed = _run_ok([*command, "mount", "-t", "tmpfs", "tmpfs", where])
     if failed is not None:
-        return f"cannot make a private mount namespace here: {failed}"
+        return f"cannot mount a tmpfs in a private mount namespace here: {failed}"
     return None
 
 
@@ -105,6 +108,9 @@ def _network_namespaces() -> str | None:
     tools = [tool for tool in ("ip", "unshare") if shutil.which(tool) is None]
     if tools:
         return f"needs {' and '.join(tools)} (iproute2, util-linux) to build hosts"
+    failed = _run_ok(["unshare", "--net", "ip", "link", "set", "lo", "up"])
+    if failed is not None:
+        return f"cannot make a network namespace here (CAP_SYS_ADMIN, CAP_NET_ADMIN): {failed}"
     return None
 
 
@@ -148,6 +154,18 @@ def _other_users() -> str | None:
     return None
 
 
+def _setuid_helper() -> str | None:
+    """A setuid-root program built in the temp dir (a process other users may not signal)."""
+    if (missing := _other_users()) is not None:
+        return missing
+    folder = os.environ.get("TMPDIR", "/tmp")
+    if os.statvfs(folder).f_flag & os.ST_NOSUID:
+        return f"{folder} is mounted nosuid: a setuid helper built there would not become root"
+    if shutil.which("gcc") is None:
+        return "needs gcc to build a setuid helper (Debian's gcc)"
+    return None
+
+
 def _ipv6() -> str | None:
     try:
         with socket.socket(socket.AF_INET6, socket.SOCK_STREAM) as probe:
@@ -175,13 +193,113 @@ def _module(name: str) -> Callable[[], str | None]:
     return check
 
 
+def _colcon() -> str | None:
+    """rclpy for the example's tests, colcon and ament_cmake beside this interpreter."""
+    if (missing := _module("rclpy")()) is not None:
+        return missing
+    if shutil.which("colcon", path=str(Path(sys.executable).parent)) is None:
+        return "needs colcon and ament_cmake from the ros extra (scripts/setup.sh installs them)"
+    return None
+
+
+def _gtest() -> str | None:
+    """What building googletest binaries with cmake needs: the tools and Debian's gtest."""
+    tools = [tool for tool in ("cmake", "make", "c++") if shutil.which(tool) is None]
+    if tools:
+        return f"building googletest binaries needs {', '.join(tools)} (apt install cmake g++)"
+    if not any(Path(root, "GTest", "GTestConfig.cmake").is_file() for root in _CMAKE_ROOTS):
+        return "needs googletest's CMake package (apt install libgtest-dev)"
+    return None
+
+
+_CMAKE_ROOTS = ("/usr/lib/cmake", *map(str, Path("/usr/lib").glob("*-linux-gnu*/cmake")))
+
+
+def bare_python() -> str | None:
+    """A system python3.11 that cannot import filelock (so not this suite's venv), if any."""
+    candidate = shutil.which("python3.11", path="/usr/bin:/bin:/usr/local/bin")
+    if candidate is None:
+        return None
+    # An empty environment: no PYTHONPATH may lend it the venv's packages.
+    probe = subprocess.run(
+        [candidate, "-c", "import filelock"], capture_output=True, env={}, check=False
+    )
+    return None if probe.returncode == 0 else candidate
+
+
+def _bare_python() -> str | None:
+    if bare_python() is not None:
+        return None
+    return (
+        "needs a system python3.11 without filelock, to run the RUNNER as ctest does with "
+        "a Python that cannot import ros-isolated-test (apt install python3.11)"
+    )
+
+
+def _tomllib() -> str | None:
+    if importlib.util.find_spec("tomllib") is not None:
+        return None
+    return f"reading pyproject.toml needs Python 3.11+ (tomllib); this is {sys.version.split()[0]}"
+
+
+#: A multi-gigabyte (mostly sparse) result file: this much free disk under the temp dir.
+FREE_DISK_BYTES = 4 << 30
+
+
+def _free_disk() -> str | None:
+    import tempfile
+
+    where = tempfile.gettempdir()
+    usage = shutil.disk_usage(where)
+    if usage.free >= FREE_DISK_BYTES:
+        return None
+    return (
+        f"needs {FREE_DISK_BYTES >> 30} GiB free under {where} for a 2.5 GiB result file "
+        f"({usage.free >> 20} MiB free)"
+    )
+
+
+#: Upstream's RUNNER (ament_cmake_ros, from the ros extra), for the controls that run it.
+UPSTREAM_RUNNER_PATH = (
+    Path(sys.prefix) / "share" / "ament_cmake_ros" / "cmake" / "run_test_isolated.py"
+)
+
+
+def _upstream_runner() -> str | None:
+    if UPSTREAM_RUNNER_PATH.is_file():
+        return None
+    return (
+        f"needs upstream's run_test_isolated.py at {UPSTREAM_RUNNER_PATH} (ament_cmake_ros, "
+        "from the ros extra: scripts/setup.sh installs it)"
+    )
+
+
+def _ctest() -> str | None:
+    tools = [tool for tool in ("cmake", "ctest") if shutil.which(tool) is None]
+    if tools:
+        return f"needs {' and '.join(tools)} (apt install cmake)"
+    return None
+
+
 ROOT = Capability("root", _root)
 UNSHARE = Capability("unshare", _unshare)
 MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
 NETWORK_NAMESPACES = Capability("network-namespaces", _network_namespaces)
 DOCKER = Capability("docker", _docker)
 OTHER_USERS = Capability("other-users", _other_users)
+SETUID_HELPER = Capability("setuid-helper", _setuid_helper)
 IPV6 = Capability("ipv6", _ipv6)
 #: The outside tier: tests that read ``../shared`` (present in CI, absent in a fresh clone).
 OUTSIDE = Capability("outside-tier", _shared)
 RCLPY = Capability("rclpy", _module("rclpy"))
+#: Building and testing the example ament_cmake package (rclpy, colcon, ament_cmake).
+COLCON = Capability("colcon", _colcon)
+#: A C++ compiler, cmake, make and googletest, to build real gtest binaries.
+GTEST = Capability("gtest", _gtest)
+#: A system python3.11 without filelock (see :func:`bare_python`).
+BARE_PYTHON = Capability("bare-python3.11", _bare_python)
+TOMLLIB = Capability("tomllib", _tomllib)
+FREE_DISK = Capability("free-disk", _free_disk)
+UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
+#: cmake and ctest, to run a registered test under ctest's TIMEOUT.
+CTEST = Capability("ctest", _ctest)
