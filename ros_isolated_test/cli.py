@@ -203,10 +203,11 @@ def status(as_json: bool) -> None:
     """List every domain ID in use on this machine, and by whom; then who waits for one.
 
     HELD BY is "runner" (a ros-isolated-test runner holds its lock), "port" (its TCP
-    port 32768+ID is bound: upstream's domain_coordinator or another program) or
+    port 32768+ID is bound: upstream's domain_coordinator or another program),
     "squatter" (a live process has ROS_DOMAIN_ID=<id> in its environment without
-    holding it: a test that outlived its runner, a shell's export). The coordinator
-    skips all of them. Runners queued for an ID follow, in the order they get one
+    holding it: a test that outlived its runner, a shell's export) or "survivor" (a
+    process of an earlier test that its runner could not end). The coordinator skips
+    all of them. Runners queued for an ID follow, in the order they get one
     (in --json: rows with "via": "queue", "domain_id": null and their "position").
     """
     from ros_isolated_test.domain_coordinator.status import held_domains, waiting_runners
