@@ -115,16 +115,19 @@ def test_the_tests_own_result_file_stays_when_its_normalised_form_cannot_be_writ
 def test_a_result_path_on_a_disk_full_before_the_run_is_a_one_line_error_naming_the_fix(
     env: dict[str, str], tmp_path: Path
 ) -> None:
+    """Nothing runs when not even the placeholder fits: no result could say what happened."""
     disk = tmp_path / "disk"
     result = disk / "t.xml"
+    ran = tmp_path / "ran"
     argv = ["sh", "-c", f'{fill(disk)}; exec "$@"', "sh"]
-    argv += [CLI, "run", "--junit-xml", str(result), "--", "true"]
+    argv += [CLI, "run", "--junit-xml", str(result), "--", "touch", str(ran)]
 
     done = run_on_tiny_disk(disk, argv, env)
 
-    assert done.returncode != 0
+    assert done.returncode == 2, done.stderr
+    assert not ran.exists(), "the test ran although its result could not be recorded"
     errors = [line for line in done.stderr.decode().splitlines() if "error:" in line]
-    assert errors, done.stderr
+    assert len(errors) == 1, done.stderr
     assert str(result) in errors[0]
     assert NO_SPACE in errors[0]
     assert "free space" in errors[0]

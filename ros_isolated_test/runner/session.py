@@ -126,7 +126,10 @@ def _run(
         return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     except DiscoveryError as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
-    result.write_placeholder()
+    if not result.write_placeholder():
+        # Said on stderr already. Nothing may run: if ctest killed the runner now, no
+        # file would say what happened, and the final write would most likely fail too.
+        return exit_codes.USAGE
     guard = _Guard()
     try:
         with _interruptible(guard), _domain(policy, request, config, capture) as domain_id:

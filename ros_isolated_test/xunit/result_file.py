@@ -121,14 +121,15 @@ class ResultFile:
         self._leave_word(cases, duration)
         return None
 
-    def write_placeholder(self) -> None:
+    def write_placeholder(self) -> bool:
         """What ctest leaves behind if it kills the runner: the test did not finish.
 
         It ends in a comment holding ``RESERVE_BYTES`` of room: should the final write
-        fail, the stand-in overwrites it in place, in blocks already allocated.
+        fail, the stand-in overwrites it in place, in blocks already allocated. False
+        when it could not be written (the error is on stderr, ``write_error`` says it).
         """
         if self.path is None:
-            return
+            return True
         message = (
             f"{NO_RESULT} If this is all there is, the runner was killed before the test "
             "ended, as a ctest TIMEOUT does (SIGKILL, no chance to write anything else): "
@@ -138,8 +139,10 @@ class ResultFile:
         note = "<!-- room for the runner to say what happened if it cannot replace this file"
         padding = f"{note}{' ' * max(RESERVE_BYTES - len(note) - 5, 0)} -->\n"
         data = serialise.serialize(suite) + padding.encode()
-        if self._write(data):
-            self.placeholder = data
+        if not self._write(data):
+            return False
+        self.placeholder = data
+        return True
 
     def _write(self, data: bytes) -> bool:
         assert self.path is not None
