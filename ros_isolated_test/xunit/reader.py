@@ -5,7 +5,10 @@ A test's result file may be broken or hostile: invalid UTF-8, characters XML for
 a cut-off end, gigabytes of output, a directory instead of a file. Everything is read
 as a stream through a sanitiser into a strict parser whose events build a small raw
 model; what cannot be read is described in ``problems`` and whatever came before it is
-kept. Memory is bounded by the caps below, not by the file.
+kept. Memory is bounded by the caps below, not by the file: markup the parser would hold
+whole (an attribute, a tag, a comment, a CDATA section) is bounded before it gets there,
+texts and names shrink as they add up, and every case is kept up to MAX_CASES, and
+beyond it every case that did not pass.
 """
 
 from __future__ import annotations
@@ -30,13 +33,30 @@ from ros_isolated_test.xunit.xml_text import TEXT_LIMIT
 #: Read at most this much of a file; the rest is reported, not parsed.
 MAX_READ_BYTES = 256 * 1024 * 1024
 CHUNK_BYTES = 1024 * 1024
-#: Test cases kept in full; later ones are only counted.
-MAX_CASES = 5000
-#: Each text keeps up to TEXT_LIMIT characters until all texts together reach this;
-#: after that each keeps only SMALL_TEXT_LIMIT.
+#: Every test case is kept up to this many: no real suite has that many in one test.
+MAX_CASES = 100_000
+#: Beyond MAX_CASES, every failed, errored or skipped case is still kept, by name with a
+#: short text, up to this many more (only a hostile file has more); passed cases beyond
+#: MAX_CASES, and any beyond this, are counted in one summary case.
+MAX_FURTHER_CASES = 10_000
+#: Texts shrink as they add up, so the canonical file stays bounded however many cases
+#: there are: TEXT_LIMIT characters each until all texts together reach TEXT_BUDGET,
+#: SMALL_TEXT_LIMIT until twice that, TINY_TEXT_LIMIT after (and beyond MAX_CASES).
 TEXT_BUDGET = 2 * 1024 * 1024
 SMALL_TEXT_LIMIT = 200
+TINY_TEXT_LIMIT = 40
+#: Names likewise: NAME_LIMIT characters each until names reach NAME_BUDGET, then
+#: SHORT_NAME_LIMIT (head and tail, so names still tell cases apart).
 NAME_LIMIT = 256
+NAME_BUDGET = 2 * 1024 * 1024
+SHORT_NAME_LIMIT = 64
+#: Failure, error and skipped elements kept per case (one of each kind always is), and
+#: test suites whose own counts are kept: more only in a hostile file.
+MAX_OUTCOMES = 16
+MAX_SUITES = 10_000
+#: The attributes the normaliser reads; the others are not kept.
+_CASE_KEYS = frozenset({"name", "classname", "time", "status", "result"})
+_OUTCOME_KEYS = frozenset({"message", "type"})
 
 OUTCOME_TAGS = frozenset(
     {"failure", "error", "skipped", "rerunFailure", "rerunError", "flakyFailure", "flakyError"}
@@ -63,7 +83,7 @@ def _count_and_show(error: UnicodeError) -> tuple[str, int]:
 codecs.register_error("ros_isolated_test.count", _count_and_show)
 
 
-@dataclass
+@dataclass(slots=True)
 class RawOutcome:
     """A failure, error or skipped element as the producer wrote it."""
 
@@ -72,7 +92,7 @@ class RawOutcome:
     text: str
 
 
-@dataclass
+@dataclass(slots=True)
 class RawCase:
     """A testcase element as the producer wrote it, texts already bounded."""
 
@@ -85,7 +105,7 @@ class RawCase:
     complete: bool = True
 
 
-@dataclass
+@dataclass(slots=True)
 class RawSuite:
     """A testsuite element: only what the normaliser uses."""
 
@@ -104,7 +124,7 @@ class ReadResult:
     root_attrs: dict[str, str] = field(default_factory=dict)
     suites: list[RawSuite] = field(default_factory=list)
     cases: list[RawCase] = field(default_factory=list)
-    #: Outcomes (``passed``, ``failure``, ...) of cases beyond MAX_CASES, only counted.
+    #: Outcomes (``passed``, ``failure``, ...) of cases only counted (see MAX_CASES).
     dropped: Counter[str] = field(default_factory=Counter)
     #: What was wrong and damaged the content: reported as an error case.
     problems: list[str] = field(default_factory=list)
@@ -119,24 +139,41 @@ class ReadResult:
 
 
 class _Budget:
+    """How many characters a text or name may keep, shrinking as they add up."""
+
     def __init__(self) -> None:
         self.used = 0
+        self.names = 0
 
-    def text(self) -> BoundedText:
-        return BoundedText(TEXT_LIMIT if self.used < TEXT_BUDGET else SMALL_TEXT_LIMIT)
+    def limit(self, small: bool = False) -> int:
+        if small or self.used >= 2 * TEXT_BUDGET:
+            return TINY_TEXT_LIMIT
+        return TEXT_LIMIT if self.used < TEXT_BUDGET else SMALL_TEXT_LIMIT
+
+    def text(self, small: bool = False) -> BoundedText:
+        return BoundedText(self.limit(small))
 
     def take(self, text: BoundedText) -> str:
         value = text.value()
         self.used += len(value)
         return value
 
-    def attrs(self, attrib: object) -> dict[str, str]:
-        limit = TEXT_LIMIT if self.used < TEXT_BUDGET else SMALL_TEXT_LIMIT
+    def attrs(
+        self, attrib: object, keys: frozenset[str] | None = None, small: bool = False
+    ) -> dict[str, str]:
+        limit = self.limit(small)
+        name_limit = NAME_LIMIT if self.names < NAME_BUDGET else SHORT_NAME_LIMIT
         result: dict[str, str] = {}
         for key, value in dict(attrib).items():  # type: ignore[call-overload]
             name = _local(str(key))
-            kept = bounded(str(value), NAME_LIMIT if name in ("name", "classname") else limit)
-            self.used += len(kept)
+            if keys is not None and name not in keys:
+                continue
+            if name in ("name", "classname"):
+                kept = bounded(str(value), name_limit)
+                self.names += len(kept)
+            else:
+                kept = bounded(str(value), limit)
+                self.used += len(kept)
             result[name] = kept
         return result
 
@@ -154,41 +191,60 @@ class _Builder:
         self.stack: list[str] = []
         self.suites: list[RawSuite] = []
         self.case: RawCase | None = None
-        self.counting: str | None = None  # outcome of a case beyond MAX_CASES
+        self.further = False  # the open case is beyond MAX_CASES
+        self.kept_further = 0
+        self.counting: str | None = None  # outcome of a case only counted
         self.in_counted_case = False
         self.text: BoundedText | None = None
         self.outcome_attrs: dict[str, str] = {}
         self.root_closed = False
+        self.dropped_outcomes = 0
+        self.dropped_suites = 0
 
     def start(self, tag: str, attrib: object) -> None:
         name = _local(tag)
         self.stack.append(name)
         if len(self.stack) == 1:
-            self.result.root_tag = name
             self.result.root_attrs = self.budget.attrs(attrib)
+            self.result.root_tag = name
         parent = self.stack[-2] if len(self.stack) > 1 else None
         if name == "testsuite":
-            attrs = self.budget.attrs(attrib)
+            attrs = self.budget.attrs(attrib, small=len(self.result.suites) >= MAX_SUITES)
             suite = RawSuite(attrs.get("name", ""), attrs)
             self.suites.append(suite)
-            self.result.suites.append(suite)
-        elif name == "testcase" and self.case is None and not self.in_counted_case:
-            suite_name = self.suites[-1].name if self.suites else ""
-            if len(self.result.cases) < MAX_CASES:
-                self.case = RawCase(self.budget.attrs(attrib), suite_name)
+            if len(self.result.suites) < MAX_SUITES:
+                self.result.suites.append(suite)
             else:
-                self.in_counted_case = True
-                self.counting = "passed"
+                self.dropped_suites += 1
+        elif name == "testcase" and self.case is None and not self.in_counted_case:
+            self._start_case(attrib)
         elif self.in_counted_case and parent == "testcase" and name in OUTCOME_TAGS:
             self.counting = _worse(self.counting or "passed", name)
         elif self.case is not None and parent == "testcase":
             if name in OUTCOME_TAGS:
-                self.outcome_attrs = self.budget.attrs(attrib)
-                self.text = self.budget.text()
+                self._start_outcome(name, attrib)
             elif name in ("system-out", "system-err"):
-                self.text = self.budget.text()
+                self.text = self.budget.text(self.further)
         elif self.case is None and parent == "testsuite" and name in ("system-out", "system-err"):
             self.text = self.budget.text()
+
+    def _start_case(self, attrib: object) -> None:
+        suite_name = self.suites[-1].name if self.suites else ""
+        self.further = len(self.result.cases) >= MAX_CASES
+        if self.further and self.kept_further >= MAX_FURTHER_CASES:
+            self.in_counted_case = True
+            self.counting = "passed"
+            return
+        self.case = RawCase(self.budget.attrs(attrib, _CASE_KEYS, self.further), suite_name)
+
+    def _start_outcome(self, name: str, attrib: object) -> None:
+        assert self.case is not None
+        outcomes = self.case.outcomes
+        if len(outcomes) >= MAX_OUTCOMES and any(item.tag == name for item in outcomes):
+            self.dropped_outcomes += 1
+            return
+        self.outcome_attrs = self.budget.attrs(attrib, _OUTCOME_KEYS, self.further)
+        self.text = self.budget.text(self.further)
 
     def data(self, data: str | bytes) -> None:
         if self.text is not None:
@@ -204,7 +260,7 @@ class _Builder:
             self.in_counted_case = False
             self.counting = None
         elif name == "testcase" and self.case is not None and parent != "testcase":
-            self.result.cases.append(self.case)
+            self._end_case(self.case)
             self.case = None
         elif self.text is not None and parent == "testcase" and self.case is not None:
             value = self.budget.take(self.text)
@@ -227,14 +283,22 @@ class _Builder:
         if not self.stack:
             self.root_closed = True
 
+    def _end_case(self, case: RawCase) -> None:
+        """Keep the case; beyond MAX_CASES only if it did not pass (passed ones are counted)."""
+        if self.further and not _noteworthy(case):
+            self.result.dropped["passed"] += 1
+            return
+        self.kept_further += self.further
+        self.result.cases.append(case)
+
     def comment(self, text: str | bytes) -> None:
         return None
 
     def close(self) -> None:
         return None
 
-    def finish_open_case(self) -> None:
-        """The file ended inside a test case: keep what it had, marked incomplete."""
+    def finish(self) -> None:
+        """Say what a hostile file lost; keep a case the file ended inside, marked."""
         if self.case is not None:
             if self.text is not None and self.stack and self.stack[-1] in OUTCOME_TAGS:
                 value = self.budget.take(self.text)
@@ -242,6 +306,23 @@ class _Builder:
             self.case.complete = False
             self.result.cases.append(self.case)
             self.case = None
+        if self.dropped_outcomes:
+            self.result.repairs.append(
+                f"{self.dropped_outcomes} failure, error or skipped element(s) beyond "
+                f"{MAX_OUTCOMES} in one test case were not kept"
+            )
+        if self.dropped_suites:
+            self.result.repairs.append(
+                f"the own counts of {self.dropped_suites} test suite(s) beyond the first "
+                f"{MAX_SUITES} were not checked"
+            )
+
+
+def _noteworthy(case: RawCase) -> bool:
+    """Whether a case failed, errored, was skipped or was cut off: kept by name always."""
+    disabled = case.attrs.get("status") == "disabled" or case.attrs.get("result") == "suppressed"
+    primary = any(item.tag in ("failure", "error", "skipped") for item in case.outcomes)
+    return disabled or primary or not case.complete
 
 
 _RANK = {"passed": 0, "skipped": 1, "error": 2, "failure": 3}
@@ -251,6 +332,235 @@ def _worse(current: str, tag: str) -> str:
     kind = "failure" if "Failure" in tag or tag == "failure" else tag
     kind = "error" if "Error" in tag else kind
     return kind if _RANK.get(kind, 0) > _RANK.get(current, 0) else current
+
+
+#: Markup the parser holds whole before it reports it, bounded in the byte stream: an
+#: attribute value keeps its head and tail around a marked cut, a CDATA section is cut
+#: into sections of this size (no character lost), comments and processing
+#: instructions are dropped, a run of blanks inside a tag becomes one space.
+ATTRIBUTE_LIMIT = TEXT_LIMIT
+CDATA_SECTION = 256 * 1024
+#: An element with more attributes than this loses the rest; a longer name stops reading.
+MAX_ATTRIBUTES = 256
+MAX_NAME_CHARS = 1024
+_BLANKS = re.compile(r"[ \t\r\n]*")
+_NAME_CHARS = re.compile(r"[^ \t\r\n=/<>\"'&]*")
+_NOT_NAME = frozenset(" \t\r\n=/<>\"'&")
+_TAG_NAME = r"[^ \t\r\n=/<>\"'&!?][^ \t\r\n=/<>\"'&]{0,255}"
+_PLAIN_ATTRIBUTE = (
+    r"[ \t\r\n]{1,64}[^ \t\r\n=/<>\"'&]{1,256}[ \t\r\n]{0,64}=[ \t\r\n]{0,64}"
+    r"(?:\"[^\"<]{0,4096}\"|'[^'<]{0,4096}')"
+)
+#: Text and small, complete tags: passed on in one C-speed match, so only the rare
+#: large or unfinished piece of markup costs Python steps.
+_PLAIN = re.compile(
+    rf"(?:[^<]+|<{_TAG_NAME}(?:{_PLAIN_ATTRIBUTE}){{0,64}}[ \t\r\n]{{0,64}}/?>"
+    rf"|</{_TAG_NAME}[ \t\r\n]{{0,64}}>)*"
+)
+_REFERENCE_TAIL = re.compile(r"^[#0-9A-Za-z]{0,10};")
+_OPEN_REFERENCE = re.compile(r"&[#0-9A-Za-z]{0,10}$")
+(_TEXT, _COMMENT, _CDATA, _PI, _NAME, _TAG, _ATTR_NAME, _EQUALS, _VALUE) = range(9)
+
+
+class _ValueCut:
+    """An attribute value streamed through: the head passes, the tail is held, the middle cut."""
+
+    def __init__(self, limit: int) -> None:
+        self.room = limit // 2
+        self.tail = ""
+        self.keep = limit // 2
+        self.cut = 0
+
+    def add(self, piece: str, out: list[str]) -> None:
+        if self.room > 0:
+            head = piece[: self.room]
+            self.room -= len(head)
+            piece = piece[len(head) :]
+            if self.room == 0 and (open_ref := _OPEN_REFERENCE.search(head)):
+                # Never cut inside a reference: it goes to the tail side instead.
+                piece = head[open_ref.start() :] + piece
+                head = head[: open_ref.start()]
+                self.room = 0
+            out.append(head)
+        if piece:
+            joined = self.tail + piece
+            self.cut += max(len(joined) - self.keep, 0)
+            self.tail = joined[-self.keep :]
+
+    def finish(self, out: list[str]) -> None:
+        tail = self.tail
+        if self.cut:
+            partial = _REFERENCE_TAIL.match(tail)
+            if partial:
+                self.cut += partial.end()
+                tail = tail[partial.end() :]
+            out.append(f"&#10;[... {self.cut} characters cut ...]&#10;")
+        out.append(tail)
+
+
+class _Markup:
+    """Keeps the parser from holding any one piece of markup whole when it is huge.
+
+    lxml's parser gets a start tag, an attribute value, a comment, a processing
+    instruction or a CDATA section whole before it says anything about it: one 200 MB
+    attribute cost 600 MB. This sees the sanitised text as markup, streaming, and
+    bounds each of them before the parser buffers it, keeping the document well-formed
+    (or broken exactly where it was). Damage it cannot repair stops the reading.
+    """
+
+    def __init__(self) -> None:
+        self.state = _TEXT
+        self.pending = ""
+        self.name_chars = 0
+        self.attributes = 0
+        self.keep_attribute = True
+        self.quote = ""
+        self.value: _ValueCut | None = None
+        self.section = 0
+        self.dropped_attributes = 0
+        self.damage: str | None = None
+
+    def feed(self, text: str, final: bool) -> str:
+        """The next sanitised piece, bounded; ``final`` flushes what was held back."""
+        text, self.pending = self.pending + text, ""
+        out: list[str] = []
+        pos, end = 0, len(text)
+        steps = {
+            _TEXT: self._text,
+            _COMMENT: self._skipped,
+            _PI: self._skipped,
+            _CDATA: self._cdata,
+            _NAME: self._name,
+            _ATTR_NAME: self._name,
+            _VALUE: self._value,
+        }
+        while pos < end and self.damage is None:
+            pos = steps.get(self.state, self._in_tag)(text, pos, final, out)
+        if final:
+            if self.value is not None and self.keep_attribute:
+                self.value.finish(out)
+            out.append(self.pending)
+            self.pending = ""
+        return "".join(out)
+
+    def _hold(self, text: str, start: int) -> int:
+        """Keep ``text[start:]`` for the next piece, which decides what it is."""
+        self.pending = text[start:]
+        return len(text)
+
+    def _text(self, text: str, pos: int, final: bool, out: list[str]) -> int:
+        plain = _PLAIN.match(text, pos)
+        assert plain is not None
+        out.append(plain.group())
+        start = plain.end()
+        if start >= len(text):
+            return start
+        ahead = text[start : start + 9]
+        if not final and len(ahead) < 9:
+            return self._hold(text, start)
+        if ahead.startswith("<!--"):
+            self.state = _COMMENT
+            return start + 4
+        if ahead.startswith("<![CDATA["):
+            out.append("<![CDATA[")
+            self.state, self.section = _CDATA, 0
+            return start + 9
+        if ahead.startswith("<?"):
+            self.state = _PI
+            return start + 2
+        self.state, self.name_chars, self.keep_attribute = _NAME, 0, True
+        if ahead.startswith("</"):
+            out.append("</")
+            return start + 2
+        out.append("<")
+        self.attributes = 0
+        return start + 1
+
+    def _skipped(self, text: str, pos: int, final: bool, out: list[str]) -> int:
+        """Comments and processing instructions: nothing a result needs, dropped."""
+        close = "-->" if self.state == _COMMENT else "?>"
+        found = text.find(close, pos)
+        if found < 0:
+            return self._hold(text, max(len(text) - len(close) + 1, pos))
+        self.state = _TEXT
+        return found + len(close)
+
+    def _cdata(self, text: str, pos: int, final: bool, out: list[str]) -> int:
+        found = text.find("]]>", pos)
+        stop = found if found >= 0 else max(len(text) - 2, pos)
+        out.append(text[pos:stop])
+        self.section += stop - pos
+        if found >= 0:
+            out.append("]]>")
+            self.state = _TEXT
+            return found + 3
+        if self.section >= CDATA_SECTION:
+            # End the section and open another: the same text, in bounded pieces.
+            out.append("]]><![CDATA[")
+            self.section = 0
+        return self._hold(text, stop)
+
+    def _name(self, text: str, pos: int, final: bool, out: list[str]) -> int:
+        match = _NAME_CHARS.match(text, pos)
+        assert match is not None
+        self.name_chars += match.end() - pos
+        if self.name_chars > MAX_NAME_CHARS:
+            self.damage = f"a name longer than {MAX_NAME_CHARS} characters: not a result file"
+            return len(text)
+        if self.keep_attribute:
+            out.append(match.group())
+        if match.end() < len(text):
+            self.state = _TAG if self.state == _NAME else _EQUALS
+        return match.end()
+
+    def _value(self, text: str, pos: int, final: bool, out: list[str]) -> int:
+        assert self.value is not None
+        found = text.find(self.quote, pos)
+        stop = found if found >= 0 else len(text)
+        if self.keep_attribute:
+            self.value.add(text[pos:stop], out)
+        if found < 0:
+            return stop
+        if self.keep_attribute:
+            self.value.finish(out)
+            out.append(self.quote)
+        self.state, self.value = _TAG, None
+        return found + 1
+
+    def _in_tag(self, text: str, pos: int, final: bool, out: list[str]) -> int:
+        """Blanks, ``=``, a quote, a name, ``/`` or ``>`` inside a start or end tag."""
+        blanks = _BLANKS.match(text, pos)
+        assert blanks is not None
+        if blanks.end() > pos:
+            run = blanks.group()
+            out.append(run if len(run) <= 64 else " ")
+            return blanks.end()
+        char = text[pos]
+        if self.state == _EQUALS and char == "=":
+            self.state = _TAG
+            if self.keep_attribute:
+                out.append(char)
+            return pos + 1
+        if char in "\"'":
+            self.state, self.quote, self.value = _VALUE, char, _ValueCut(ATTRIBUTE_LIMIT)
+            if self.keep_attribute:
+                out.append(char)
+            return pos + 1
+        if char == "/" and pos + 1 == len(text):
+            self.pending = char  # is it "/>"? The next piece says.
+            return pos + 1
+        if char in _NOT_NAME:
+            # ">", "/>", or a character no tag may hold: then the tag is closed right
+            # after it, so the parser reports it now instead of buffering until a ">".
+            self.state, self.keep_attribute = _TEXT, True
+            closing = text[pos : pos + 2] if text.startswith("/>", pos) else char
+            out.append(closing if closing in (">", "/>") else f"{closing}>")
+            return pos + len(closing)
+        self.attributes += 1
+        self.keep_attribute = self.attributes <= MAX_ATTRIBUTES
+        self.dropped_attributes += not self.keep_attribute
+        self.state, self.name_chars = _ATTR_NAME, 0
+        return pos
 
 
 _NOT_XML = frozenset({"idna", "punycode", "undefined", "raw_unicode_escape", "unicode_escape"})
@@ -268,6 +578,7 @@ class _Sanitiser:
         self.doctype = False
         self.prolog_lines = 0
         self.illegal = 0
+        self.markup = _Markup()
 
     def feed(self, data: bytes, final: bool = False) -> bytes:
         text = self.carry + self._decode(data, final)
@@ -301,7 +612,7 @@ class _Sanitiser:
                 self.result.repairs.append(
                     "DTD markup was made inert: DTDs and entities are never loaded or expanded"
                 )
-        return text.encode("utf-8")
+        return self.markup.feed(text, final).encode("utf-8")
 
     def _decode(self, data: bytes, final: bool) -> str:
         if self.decoder is None:
@@ -385,6 +696,11 @@ class _Sanitiser:
             index = start + 1
 
     def finish(self) -> None:
+        if self.markup.dropped_attributes:
+            self.result.problems.append(
+                f"{self.markup.dropped_attributes} attribute(s) beyond the first "
+                f"{MAX_ATTRIBUTES} of an element were dropped"
+            )
         invalid = getattr(_counts, "invalid", 0)
         if invalid:
             self.result.repairs.append(
@@ -449,7 +765,6 @@ def _parse(handle: BinaryIO, result: ReadResult) -> None:
     )
     sanitiser = _Sanitiser(result)
     _counts.invalid = 0
-    stopped = False
     while True:
         chunk = handle.read(CHUNK_BYTES)
         result.size += len(chunk)
@@ -460,10 +775,12 @@ def _parse(handle: BinaryIO, result: ReadResult) -> None:
                 f"only the first {MAX_READ_BYTES // (1024 * 1024)} MiB of {total} bytes "
                 "were read: the file is too large to be a useful result"
             )
-            stopped = True
             break
         try:
             parser.feed(sanitiser.feed(chunk, final))
+            if sanitiser.markup.damage is not None:
+                result.problems.append(sanitiser.markup.damage)
+                break
             if final:
                 parser.close()
         except etree.XMLSyntaxError as error:
@@ -475,13 +792,11 @@ def _parse(handle: BinaryIO, result: ReadResult) -> None:
                 result.problems.append(
                     "content after the root element (a second root?) was ignored"
                 )
-            stopped = True
             break
         if final:
             break
     sanitiser.finish()
-    if stopped or not builder.root_closed:
-        builder.finish_open_case()
+    builder.finish()
 
 
 def _remaining(handle: BinaryIO) -> int:
