@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -12,8 +11,9 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import BIN, CLI, run_cli
-from test_ament_contract import load_result
+from helpers import capabilities
+from helpers.commands import BIN, CLI, run_cli
+from helpers.results import load_result
 
 
 def run(args: list[str], env: dict[str, str], cwd: Path) -> subprocess.CompletedProcess[str]:
@@ -296,23 +296,12 @@ def test_runner_path_prints_an_existing_absolute_python_file(
 # --- the RUNNER script with a Python that lacks the package --------------------------------
 
 
-def _bare_python() -> str | None:
-    """A system python3.11 that cannot import filelock (so not the venv's)."""
-    candidate = shutil.which("python3.11", path="/usr/bin:/bin:/usr/local/bin")
-    if candidate is None:
-        return None
-    probe = subprocess.run(
-        [candidate, "-c", "import filelock"], capture_output=True, env={}, check=False
-    )
-    return None if probe.returncode == 0 else candidate
-
-
+@capabilities.BARE_PYTHON
 def test_runner_script_reexecs_with_the_clis_python(
     runner_script: str, lock_dir: Path, tmp_path: Path
 ) -> None:
-    python = _bare_python()
-    if python is None:
-        pytest.skip("needs a system python3.11 without filelock")
+    python = capabilities.bare_python()
+    assert python is not None
     result = tmp_path / "pkg" / "t.xml"
     # The runner's own command line, read by the test: it must be the venv's interpreter.
     command = ["sh", "-c", "tr '\\0' ' ' < /proc/$PPID/cmdline; echo"]
@@ -344,12 +333,12 @@ def test_runner_script_reexecs_with_the_clis_python(
     assert load_result(result).only.outcome == "passed"
 
 
+@capabilities.BARE_PYTHON
 def test_runner_script_without_the_cli_on_path_says_how_to_fix_it(
     runner_script: str, lock_dir: Path, tmp_path: Path
 ) -> None:
-    python = _bare_python()
-    if python is None:
-        pytest.skip("needs a system python3.11 without filelock")
+    python = capabilities.bare_python()
+    assert python is not None
     proc = subprocess.run(
         [
             "/usr/bin/env",

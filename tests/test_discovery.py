@@ -10,9 +10,7 @@ tests/test_network_isolation.py shows the same decision stopping real crosstalk.
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import shutil
 import subprocess
 import sys
 from collections.abc import Iterator, Sequence
@@ -21,11 +19,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
-from conftest import crosstalk_workspace, run_cli, run_runner
-from test_ament_contract import ResultSummary, load_result
+from helpers import capabilities
+from helpers.commands import run_cli, run_runner
+from helpers.results import ResultSummary, load_result
+from helpers.workspace import CrosstalkBuilds, crosstalk_workspace
 
 if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path below
-    from crosstalk_workspace import Run
+    from examples.crosstalk_workspace import Run
 
 RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 ONLY = "ROS_LOCALHOST_ONLY"
@@ -451,25 +451,20 @@ ws = crosstalk_workspace()
 
 
 @pytest.fixture(scope="module")
-def example_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
+def example_run(
+    crosstalk_builds: CrosstalkBuilds, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[Run]:
     """The six-test suite at -j6 through our RUNNER, with no discovery variable of the caller."""
-    problem = ws.isolated_runner_problem()
-    if problem:
-        pytest.skip(f"ros-isolated-test's runner is not available: {problem}")
     with pytest.MonkeyPatch.context() as patch:
         for name in (*DISCOVERY_VARS, "ROS_ISOLATED_TEST_DOMAINS"):
             patch.delenv(name, raising=False)
         patch.setenv("ROS_ISOLATED_TEST_LOCK_DIR", str(tmp_path_factory.mktemp("example_locks")))
-        run: Run = ws.run(tmp_path_factory.mktemp("discovery_ws"), "isolated")
+        run = crosstalk_builds.test("isolated")
     yield run
 
 
 @pytest.mark.colcon
-@pytest.mark.skipif(
-    importlib.util.find_spec("rclpy") is None
-    or shutil.which("colcon", path=ws.colcon_env()["PATH"]) is None,
-    reason="needs rclpy and colcon from the ros extra (scripts/setup.sh installs them)",
-)
+@capabilities.COLCON
 def test_example_parallel_suite_passes_with_localhost(example_run: Run) -> None:
     """Within one host LOCALHOST must not stop a test's own nodes from finding each other."""
     failed = {

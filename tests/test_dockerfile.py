@@ -8,6 +8,7 @@ the same .dockerignore rules Docker applies, so a COPY of an ignored file is cau
 from __future__ import annotations
 
 import contextlib
+import importlib
 import json
 import re
 import shlex
@@ -17,11 +18,10 @@ from fnmatch import fnmatchcase
 from pathlib import PurePosixPath
 
 import pytest
-from conftest import REPO, run_cli
+from helpers import capabilities
+from helpers.commands import REPO, run_cli
 
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, lock_dir_from_env
-
-tomllib = pytest.importorskip("tomllib", reason="reading pyproject.toml needs Python 3.11+")
 
 DOCKERFILE = REPO / "Dockerfile"
 DOCKERIGNORE = REPO / ".dockerignore"
@@ -178,6 +178,8 @@ def patterns() -> list[tuple[bool, list[str]]]:
 
 @pytest.fixture(scope="module")
 def pyproject() -> dict[str, object]:
+    capabilities.require(capabilities.TOMLLIB)
+    tomllib = importlib.import_module("tomllib")  # 3.11+; the suite also runs on 3.10
     data: dict[str, object] = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))
     return data
 

@@ -11,19 +11,20 @@ import ast
 import json
 import os
 import pwd
-import select
-import shutil
 import signal
 import socket
 import stat
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pytest
-from conftest import CLI, REPO, run_cli, run_runner
+from helpers import capabilities
+from helpers.commands import CLI, REPO, run_cli, run_runner
+from helpers.domains import free_ids
+from helpers.processes import DEADLINE, WAIT_SCRIPT, Children, user_keywords, wait_for
+from helpers.results import result_error
 from lxml import etree
 
 from ros_isolated_test.domain_coordinator import (
@@ -38,9 +39,6 @@ from ros_isolated_test.domain_coordinator import (
 )
 from ros_isolated_test.domain_coordinator.port_guard import PORT_BASE, port_is_taken
 from ros_isolated_test.domain_coordinator.reservation import lock_path
-
-HIGH_IDS = range(215, 233)
-DEADLINE = 60.0
 
 #: Holds an ID with our coordinator until its stdin closes. argv: lock dir, pool IDs.
 HOLD_SCRIPT = """
@@ -77,102 +75,6 @@ sock.listen()
 print("bound", flush=True)
 sys.stdin.read()
 """
-
-#: A test command: writes its PID, then waits for a file or its deadline. argv: pid file, go.
-WAIT_SCRIPT = """
-import os, sys, time
-from pathlib import Path
-Path(sys.argv[1]).write_text(str(os.getpid()))
-deadline = time.monotonic() + 60
-while not Path(sys.argv[2]).exists() and time.monotonic() < deadline:
-    time.sleep(0.02)
-"""
-
-
-def free_ids(
-    count: int, candidates: Sequence[int] = HIGH_IDS, consecutive: bool = False
-) -> list[int]:
-    """IDs whose port nothing holds right now."""
-    free = [domain_id for domain_id in candidates if not port_is_taken(domain_id)]
-    if consecutive:
-        for index in range(len(free) - count + 1):
-            window = free[index : index + count]
-            if window[-1] - window[0] == count - 1:
-                return window
-        pytest.skip(f"no {count} consecutive free ports among {list(candidates)}")
-    if len(free) < count:
-        pytest.skip(f"only {len(free)} of the candidate ports are free")
-    return free[:count]
-
-
-class Children:
-    """Child processes of one test, each controlled through its stdin; all killed at the end."""
-
-    def __init__(self) -> None:
-        self.processes: list[subprocess.Popen[str]] = []
-
-    def start(self, args: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
-        process: subprocess.Popen[str] = subprocess.Popen(  # type: ignore[call-overload]
-            list(args),
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            **kwargs,
-        )
-        self.processes.append(process)
-        return process
-
-    def python(self, script: str, *args: object, **kwargs: object) -> subprocess.Popen[str]:
-        return self.start([sys.executable, "-c", script, *map(str, args)], **kwargs)
-
-    def first_line(self, process: subprocess.Popen[str]) -> str:
-        """The child's first line of output, or a failure showing why it never came."""
-        assert process.stdout is not None
-        ready, _, _ = select.select([process.stdout], [], [], DEADLINE)
-        line = process.stdout.readline() if ready else ""
-        if not line:
-            process.kill()
-            _, stderr = process.communicate(timeout=DEADLINE)
-            pytest.fail(f"child {process.args!r} printed nothing; stderr:\n{stderr}")
-        return line.strip()
-
-    def finish(self, process: subprocess.Popen[str]) -> int:
-        """Close its stdin (the signal to let go) and wait for it."""
-        assert process.stdin is not None
-        process.stdin.close()
-        return process.wait(timeout=DEADLINE)
-
-    def kill_all(self) -> None:
-        for process in self.processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=DEADLINE)
-            for stream in (process.stdin, process.stdout, process.stderr):
-                if stream is not None:
-                    stream.close()
-
-
-@pytest.fixture
-def children() -> Iterator[Children]:
-    spawned = Children()
-    yield spawned
-    spawned.kill_all()
-
-
-def wait_for(path: Path, timeout: float = DEADLINE) -> None:
-    deadline = time.monotonic() + timeout
-    while not path.exists():
-        if time.monotonic() > deadline:
-            pytest.fail(f"{path} did not appear within {timeout} s")
-        time.sleep(0.02)
-
-
-def result_error(result_file: Path) -> str:
-    errors = etree.parse(str(result_file)).getroot().findall("./testsuite/testcase/error")
-    assert len(errors) == 1
-    return errors[0].get("message") or ""
-
 
 # -- reserving and releasing --------------------------------------------------------------
 
@@ -358,7 +260,7 @@ def test_default_lock_dir_is_the_same_for_every_user(tmp_path: Path) -> None:
         )
         seen.add(result.stdout.strip())
     if os.getuid() == 0:
-        _skip_unless_other_users_can_run_python()
+        capabilities.require(capabilities.OTHER_USERS)
         result = subprocess.run(
             [sys.executable, "-c", code],
             env={**base, "TMPDIR": str(tmp_path), "HOME": "/nonexistent", "USER": "nobody"},
@@ -486,9 +388,12 @@ def test_a_sigkilled_runner_frees_its_lock_and_port_but_its_test_still_blocks_th
 def test_an_id_held_by_upstream_is_skipped(
     lock_dir: Path, env: dict[str, str], children: Children
 ) -> None:
-    upstream = children.python(UPSTREAM_SCRIPT)
+    # An ID of upstream's range 1-100 that no squatter has either (upstream does not look
+    # for them): the control at the end needs it free once upstream lets go.
+    (chosen,) = free_ids(1, range(1, 101))
+    upstream = children.python(UPSTREAM_SCRIPT, chosen)
     upstream_id = int(children.first_line(upstream))
-    assert 1 <= upstream_id <= 100
+    assert upstream_id == chosen
     (other,) = free_ids(1)
 
     assert DomainCoordinator(lock_dir, (upstream_id,)).try_reserve(["a"]) is None
@@ -498,11 +403,16 @@ def test_an_id_held_by_upstream_is_skipped(
     with DomainCoordinator(lock_dir, range(1, 102)).reserve(["a"]) as reservation:
         assert reservation.domain_id != upstream_id
 
-    assert held_domains(lock_dir, (upstream_id,)) == [HeldDomain(upstream_id, "port", None)]
+    # Status lists every ID of the lock dir's files too: others' IDs are in use as well.
+    ours = [
+        item for item in held_domains(lock_dir, (upstream_id,)) if item.domain_id == upstream_id
+    ]
+    assert ours == [HeldDomain(upstream_id, "port", None)]
     env[POOL_ENV] = str(upstream_id)
     result = run_cli(["status", "--json"], env)
     assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout) == [{"domain_id": upstream_id, "via": "port"}]
+    rows = [row for row in json.loads(result.stdout) if row["domain_id"] == upstream_id]
+    assert rows == [{"domain_id": upstream_id, "via": "port"}]
     table = run_cli(["status"], env)
     assert table.returncode == 0, table.stderr
     assert "port 32768+ID taken" in table.stdout
@@ -514,7 +424,7 @@ def test_an_id_held_by_upstream_is_skipped(
 
 
 def test_upstream_skips_an_id_our_coordinator_holds(lock_dir: Path, children: Children) -> None:
-    ours, after = free_ids(2, consecutive=True)
+    ours, after = free_ids(2)
     with DomainCoordinator(lock_dir, (ours,)).reserve(["a"]) as reservation:
         assert reservation.domain_id == ours
         upstream = children.python(UPSTREAM_SCRIPT, ours, after)
@@ -529,7 +439,7 @@ def test_upstream_skips_an_id_our_coordinator_holds(lock_dir: Path, children: Ch
 def test_upstream_skips_the_id_of_a_running_runner(
     env: dict[str, str], tmp_path: Path, children: Children
 ) -> None:
-    ours, after = free_ids(2, consecutive=True)
+    ours, after = free_ids(2)
     env[POOL_ENV] = str(ours)
     pid_file, go = tmp_path / "test.pid", tmp_path / "go"
     runner = children.start(
@@ -551,8 +461,8 @@ def test_upstream_skips_the_id_of_a_running_runner(
 def test_an_unrelated_program_on_the_port_is_skipped(
     address: str, lock_dir: Path, children: Children
 ) -> None:
-    if ":" in address and not socket.has_ipv6:
-        pytest.skip("no IPv6 here")
+    if ":" in address:
+        capabilities.require(capabilities.IPV6)
     taken, other = free_ids(2)
     binder = children.python(BIND_SCRIPT, address, PORT_BASE + taken)
     assert children.first_line(binder) == "bound"
@@ -586,7 +496,9 @@ def test_status_lists_an_id_held_outside_the_callers_pool(
 def test_status_lists_upstream_holders_before_any_runner_made_the_lock_dir(
     lock_dir: Path, env: dict[str, str], children: Children
 ) -> None:
-    upstream = children.python(UPSTREAM_SCRIPT)
+    # Upstream's first free ID, and no squatter's (upstream does not look): status must
+    # name upstream's port alone.
+    upstream = children.python(UPSTREAM_SCRIPT, *free_ids(1, range(1, 101)))
     upstream_id = int(children.first_line(upstream))
     missing = lock_dir / "not-made-yet"
     assert held_domains(missing, (upstream_id,)) == [HeldDomain(upstream_id, "port", None)]
@@ -601,32 +513,55 @@ def test_status_lists_upstream_holders_before_any_runner_made_the_lock_dir(
 # -- the runner never loads upstream's top-level domain_coordinator ------------------------
 
 
+def _upstream_imports(text: str, label: str) -> list[str]:
+    """Where ``text`` imports upstream's top-level ``domain_coordinator``, as label:line."""
+    found = []
+    for node in ast.walk(ast.parse(text, filename=label)):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module]
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "import_module"
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+        ):
+            names = [str(node.args[0].value)]
+        found += [
+            f"{label}:{getattr(node, 'lineno', '?')}: {name}"
+            for name in names
+            if name == "domain_coordinator" or name.startswith("domain_coordinator.")
+        ]
+    return found
+
+
+def test_control_the_import_scan_finds_every_way_to_import_upstream() -> None:
+    text = (
+        "import domain_coordinator\n"
+        "from domain_coordinator import domain_id\n"
+        "import importlib; importlib.import_module('domain_coordinator.impl')\n"
+        "from ros_isolated_test.domain_coordinator import POOL_ENV\n"
+        "from .domain_coordinator import pool\n"
+        "from . import domain_coordinator\n"
+    )
+    assert _upstream_imports(text, "x.py") == [
+        "x.py:1: domain_coordinator",
+        "x.py:2: domain_coordinator",
+        "x.py:3: domain_coordinator.impl",
+    ]
+
+
 def test_no_source_file_imports_the_top_level_domain_coordinator() -> None:
     package = REPO / "ros_isolated_test"
     sources = sorted(package.rglob("*.py"))
     assert len(sources) > 10
     offenders = []
     for source in sources:
-        tree = ast.parse(source.read_text(encoding="utf-8"), filename=str(source))
-        for node in ast.walk(tree):
-            names: list[str] = []
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                names = [node.module]
-            elif (
-                isinstance(node, ast.Call)
-                and isinstance(node.func, ast.Attribute)
-                and node.func.attr == "import_module"
-                and node.args
-                and isinstance(node.args[0], ast.Constant)
-            ):
-                names = [str(node.args[0].value)]
-            offenders += [
-                f"{source.relative_to(REPO)}:{node.lineno}: {name}"
-                for name in names
-                if name == "domain_coordinator" or name.startswith("domain_coordinator.")
-            ]
+        label = str(source.relative_to(REPO))
+        offenders += _upstream_imports(source.read_text(encoding="utf-8"), label)
     assert offenders == []
 
 
@@ -678,57 +613,13 @@ def test_ctest_runner_works_with_a_poisoned_domain_coordinator_first_on_pythonpa
 # -- every user on the machine shares the lock directory -----------------------------------
 
 
-def _skip_unless_other_users_can_run_python() -> None:
-    """Children run as other users need root, and an interpreter they may execute.
-
-    A virtualenv made from a Python under /root (pyenv) is not executable by others.
-    """
-    if os.getuid() != 0:
-        pytest.skip("needs root to run children as other users")
-    try:
-        subprocess.run(
-            [sys.executable, "-c", "import ros_isolated_test"],
-            check=True,
-            capture_output=True,
-            user=65534,
-            group=65534,
-            extra_groups=[],
-            cwd="/",
-        )
-    except (OSError, subprocess.CalledProcessError) as error:
-        pytest.skip(f"user nobody cannot run this test's Python ({sys.executable}): {error}")
-
-
-@pytest.fixture
-def traversable_dir(tmp_path: Path) -> Iterator[Path]:
-    """pytest's tmp dirs are private to root; other users need a way in to share locks."""
-    _skip_unless_other_users_can_run_python()
-    shared = Path(os.environ.get("TMPDIR", "/tmp")) / f"rit-shared-{os.getpid()}-{tmp_path.name}"
-    shared.mkdir(mode=0o777)
-    os.chmod(shared, 0o777)
-    try:
-        yield shared
-    finally:
-        shutil.rmtree(shared, ignore_errors=True)
-
-
-def _as_user(uid: int) -> dict[str, object]:
-    entry = pwd.getpwuid(uid)
-    return {"user": uid, "group": entry.pw_gid, "extra_groups": [], "cwd": "/"}
-
-
 def test_users_share_lock_files_and_the_lock_dir(traversable_dir: Path, children: Children) -> None:
-    nobody, daemon = 65534, 1
-    try:
-        pwd.getpwuid(nobody)
-        pwd.getpwuid(daemon)
-    except KeyError:
-        pytest.skip("needs the users nobody and daemon")
+    nobody, daemon = 65534, 1  # traversable_dir requires both users
     first, second = free_ids(2)
     lock_dir = traversable_dir / "locks"
 
     # nobody creates the lock dir and the lock file of `first`, under umask 077.
-    by_nobody = children.python(HOLD_SCRIPT, lock_dir, first, **_as_user(nobody))
+    by_nobody = children.python(HOLD_SCRIPT, lock_dir, first, **user_keywords(nobody))
     assert children.first_line(by_nobody) == str(first)
     assert lock_dir.stat().st_uid == nobody
     assert stat.S_IMODE(lock_dir.stat().st_mode) == 0o1777
@@ -736,24 +627,24 @@ def test_users_share_lock_files_and_the_lock_dir(traversable_dir: Path, children
     assert stat.S_IMODE(lock_path(lock_dir, first).stat().st_mode) == 0o666
 
     # daemon, another user, finds `first` held by nobody and takes `second`.
-    by_daemon = children.python(HOLD_SCRIPT, lock_dir, first, second, **_as_user(daemon))
+    by_daemon = children.python(HOLD_SCRIPT, lock_dir, first, second, **user_keywords(daemon))
     assert children.first_line(by_daemon) == str(second)
     held = {item.domain_id: item for item in held_domains(lock_dir, (first, second))}
     assert set(held) == {first, second}
-    assert held[first].holder is not None
-    assert (held[first].holder.user, held[first].holder.pid) == ("nobody", by_nobody.pid)
-    assert held[second].holder is not None
-    assert (held[second].holder.user, held[second].holder.pid) == ("daemon", by_daemon.pid)
+    first_holder, second_holder = held[first].holder, held[second].holder
+    assert first_holder is not None and second_holder is not None
+    assert (first_holder.user, first_holder.pid) == ("nobody", by_nobody.pid)
+    assert (second_holder.user, second_holder.pid) == ("daemon", by_daemon.pid)
     assert DomainCoordinator(lock_dir, (first, second)).try_reserve(["root"]) is None
 
     assert children.finish(by_nobody) == 0
     assert children.finish(by_daemon) == 0
     assert held_domains(lock_dir, (first, second)) == []
     # daemon can now lock the file nobody created, and nobody the one daemon created.
-    swapped = children.python(HOLD_SCRIPT, lock_dir, first, **_as_user(daemon))
+    swapped = children.python(HOLD_SCRIPT, lock_dir, first, **user_keywords(daemon))
     assert children.first_line(swapped) == str(first)
     assert children.finish(swapped) == 0
-    swapped = children.python(HOLD_SCRIPT, lock_dir, second, **_as_user(nobody))
+    swapped = children.python(HOLD_SCRIPT, lock_dir, second, **user_keywords(nobody))
     assert children.first_line(swapped) == str(second)
     assert children.finish(swapped) == 0
 
@@ -786,7 +677,7 @@ def test_an_unwritable_lock_file_of_another_user_does_not_lock_everyone_out(
         text=True,
         timeout=120,
         check=False,
-        **_as_user(daemon),  # type: ignore[arg-type]
+        **user_keywords(daemon),
     )
     assert result.returncode == 0, result.stdout + result.stderr
     assert "id=" in result.stdout

@@ -3,54 +3,34 @@
 Six rclpy tests publish on one topic at once (ctest -j6). Through our runner each must get
 its own ROS_DOMAIN_ID and pass; through ament's plain run_test.py (the control) the same
 tests must fail, which is what shows the passes come from isolation and not from luck.
-The workspace helpers are the demo's own (examples/crosstalk_workspace.py), loaded by path.
+The workspace helpers are the demo's own (examples/crosstalk_workspace.py), loaded by path;
+the package is built once per session (the ``crosstalk_builds`` fixture).
 """
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
-import shutil
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
-from conftest import crosstalk_workspace
+from helpers import capabilities
+from helpers.workspace import CrosstalkBuilds
 
-if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path below
-    from crosstalk_workspace import Record, Run
+if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path
+    from examples.crosstalk_workspace import Record, Run
 
 
-ws = crosstalk_workspace()
-
-pytestmark = [
-    pytest.mark.colcon,
-    pytest.mark.skipif(
-        importlib.util.find_spec("rclpy") is None
-        or shutil.which("colcon", path=ws.colcon_env()["PATH"]) is None,
-        reason="needs rclpy and colcon from the ros extra (scripts/setup.sh installs them)",
-    ),
-]
+pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
 
 
 @pytest.fixture(scope="module")
-def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("crosstalk_ws")
+def isolated_run(crosstalk_builds: CrosstalkBuilds) -> Run:
+    return crosstalk_builds.test("isolated")
 
 
 @pytest.fixture(scope="module")
-def isolated_run(workspace: Path) -> Run:
-    problem = ws.isolated_runner_problem()
-    if problem:
-        pytest.skip(f"ros-isolated-test's runner is not available: {problem}")
-    run: Run = ws.run(workspace, "isolated")
-    return run
-
-
-@pytest.fixture(scope="module")
-def plain_run(workspace: Path) -> Run:
-    run: Run = ws.run(workspace, "plain")
-    return run
+def plain_run(crosstalk_builds: CrosstalkBuilds) -> Run:
+    return crosstalk_builds.test("plain")
 
 
 def _records(run: Run) -> list[Record]:

@@ -11,9 +11,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import run_cli, run_runner
+from helpers.commands import run_cli, run_runner
+from helpers.results import NO_RESULT, ResultSummary, domain_of, load_result, own_result
 from lxml import etree
-from test_ament_contract import NO_RESULT, ResultSummary, domain_of, load_result, own_result
 
 from ros_isolated_test import __version__
 from ros_isolated_test.xunit import validate

@@ -21,9 +21,8 @@ from pathlib import Path
 
 import filelock
 import pytest
-from conftest import run_cli, run_runner
-from test_ament_contract import ament
-from test_domain_coordinator import free_ids
+from helpers.commands import ament, run_cli, run_runner
+from helpers.domains import free_ids
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
 from ros_isolated_test.domain_coordinator.reservation import lock_path

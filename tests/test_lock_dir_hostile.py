@@ -24,19 +24,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import CLI
-from test_domain_coordinator import (
-    DEADLINE,
-    HIGH_IDS,
-    WAIT_SCRIPT,
-    Children,
-    _as_user,
-    children,
-    free_ids,
-    result_error,
-    traversable_dir,
-    wait_for,
-)
+from helpers import capabilities
+from helpers.commands import CLI
+from helpers.domains import HIGH_IDS, free_ids
+from helpers.processes import DEADLINE, WAIT_SCRIPT, Children, user_keywords, wait_for
+from helpers.results import result_error
 
 from ros_isolated_test.domain_coordinator import (
     LOCK_DIR_ENV,
@@ -50,8 +42,6 @@ from ros_isolated_test.domain_coordinator.reservation import (
     own_lock_path,
     release_stamp,
 )
-
-__all__ = ["children", "traversable_dir"]  # fixtures, used by name
 
 NOBODY, DAEMON = 65534, 1
 #: A run that takes longer than this is hanging (on a FIFO, a lock, a mount).
@@ -146,19 +136,14 @@ def shared_env(env: dict[str, str], lock_dir: Path, *pool: int) -> dict[str, str
 @pytest.fixture
 def shared_lock_dir(traversable_dir: Path) -> Path:
     """A mode-1777 lock directory that the users nobody and daemon can reach."""
-    for uid in (NOBODY, DAEMON):
-        try:
-            _as_user(uid)
-        except KeyError:
-            pytest.skip(f"needs the user with UID {uid}")
-    path = traversable_dir / "locks"
+    path = traversable_dir / "locks"  # traversable_dir requires the users nobody and daemon
     path.mkdir()
     os.chmod(path, 0o1777)
     return path
 
 
 def as_user(uid: int, args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess[str]:
-    return run_timed(args, env, **_as_user(uid))
+    return run_timed(args, env, **user_keywords(uid))
 
 
 # -- a lock file another user planted -------------------------------------------------------
@@ -204,7 +189,7 @@ def test_users_on_either_side_of_a_planted_lock_file_never_hold_one_id_at_once(
         holder = children.start(
             [CLI, "run", "--", sys.executable, "-c", WAIT_SCRIPT, str(pid_file), str(go)],
             env=one_id,
-            **_as_user(holder_uid),
+            **user_keywords(holder_uid),
         )
         try:
             wait_for(pid_file)
@@ -393,11 +378,11 @@ def test_a_record_or_stamp_another_user_planted_is_never_written_or_replaced(
     plant_file(planted, NOBODY, mode)
     before = snapshot(planted)
 
-    result = run_timed(
-        ["run", "--", "sh", "-c", PRINT_ID],
-        shared_env(env, shared_lock_dir, first),
-        **(_as_user(runner) if runner else {}),
-    )
+    args, environ = ["run", "--", "sh", "-c", PRINT_ID], shared_env(env, shared_lock_dir, first)
+    if runner:
+        result = run_timed(args, environ, **user_keywords(runner))
+    else:
+        result = run_timed(args, environ)
 
     assert granted_id(result) == first
     assert_unchanged(planted, before)
@@ -537,11 +522,9 @@ def test_a_lock_dir_of_another_user_mode_0755_is_refused_for_a_non_root_runner(
 @pytest.fixture
 def mount_point(tmp_path: Path) -> Iterator[Path]:
     """An empty directory; mounts on it live in a namespace that dies with the run."""
-    if os.getuid() != 0:
-        pytest.skip("mounting a read-only or tiny file system needs root")
+    capabilities.require(capabilities.MOUNT_NAMESPACE)
     unshare = shutil.which("unshare")
-    if unshare is None:
-        pytest.skip("unshare(1) is not installed")
+    assert unshare is not None
     path = tmp_path / "mnt"
     path.mkdir()
     probe = subprocess.run(
@@ -561,8 +544,7 @@ def mount_point(tmp_path: Path) -> Iterator[Path]:
         text=True,
         timeout=DEADLINE,
     )
-    if probe.returncode != 0:
-        pytest.skip(f"cannot mount in a private mount namespace here: {probe.stderr.strip()}")
+    assert probe.returncode == 0, probe.stderr
     yield path
     assert not os.path.ismount(path), "a mount leaked out of its namespace"
 

@@ -14,11 +14,9 @@ The addresses below exist only inside the two namespaces, which are always delet
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import json
 import os
 import secrets
-import shutil
 import signal
 import subprocess
 import sys
@@ -29,16 +27,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import CLI
-from test_ament_contract import ResultSummary, load_result
+from helpers import capabilities
+from helpers.commands import CLI
+from helpers.results import ResultSummary, load_result
 
-pytestmark = [
-    pytest.mark.ros,
-    pytest.mark.skipif(
-        importlib.util.find_spec("rclpy") is None,
-        reason="needs rclpy from the ros extra (scripts/setup.sh installs it)",
-    ),
-]
+pytestmark = [pytest.mark.ros, capabilities.RCLPY.mark]
 
 HELPERS = Path(__file__).resolve().parent / "helpers"
 TALKER = HELPERS / "host_talker.py"
@@ -90,20 +83,13 @@ def _remove_namespace(name: str) -> None:
 
 @pytest.fixture(scope="module")
 def hosts() -> Iterator[Hosts]:
-    missing = [tool for tool in ("ip", "unshare") if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"needs {' and '.join(missing)} to build two hosts out of namespaces")
+    capabilities.require(capabilities.NETWORK_NAMESPACES, capabilities.UNSHARE)
     tag = f"rit-{os.getpid()}-{secrets.token_hex(2)}"
     a, b = Host(f"{tag}-a", ADDRESS_A), Host(f"{tag}-b", ADDRESS_B)
     created: list[str] = []
     try:
         for host in (a, b):
-            proc = _ip("netns", "add", host.namespace, check=False)
-            if proc.returncode != 0:
-                pytest.skip(
-                    f"cannot create network namespaces (`ip netns add` said "
-                    f"{proc.stderr.strip()!r}): needs root (CAP_NET_ADMIN and CAP_SYS_ADMIN)"
-                )
+            _ip("netns", "add", host.namespace)
             created.append(host.namespace)
         # Made inside A with its peer put straight into B: the link never exists on the
         # machine's own network.
@@ -113,15 +99,6 @@ def hosts() -> Iterator[Hosts]:
             _ip("-n", host.namespace, "addr", "add", f"{host.address}/{PREFIX_LEN}", "dev", device)
             _ip("-n", host.namespace, "link", "set", device, "up")
             _ip("-n", host.namespace, "link", "set", "lo", "up")
-        probe = subprocess.run(
-            ["ip", "netns", "exec", a.namespace, *_UNSHARE, "true"],
-            capture_output=True,
-            text=True,
-            timeout=30,
-            check=False,
-        )
-        if probe.returncode != 0:
-            pytest.skip(f"cannot create a PID namespace with its own /proc: {probe.stderr.strip()}")
         yield Hosts(a, b)
     finally:
         for name in created:

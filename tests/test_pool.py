@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import run_cli
+from helpers.commands import run_cli
 from lxml import etree
 
 from ros_isolated_test.domain_coordinator import POOL_ENV, PoolSpecError, parse_pool

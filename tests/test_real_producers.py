@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import resource
-import shutil
 import signal
 import subprocess
 import sys
@@ -17,8 +16,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
-from conftest import run_cli, run_runner
-from test_normalise_samples import Canonical, check_canonical
+from helpers import capabilities
+from helpers.canonical import Canonical, check_canonical
+from helpers.commands import run_cli, run_runner
 
 PACKAGE = "pkg"
 
@@ -98,9 +98,7 @@ TEST(Crash, Abort) {
 @pytest.fixture(scope="module")
 def gtest_build(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The four gtest binaries, built once with cmake and make against Debian's googletest."""
-    missing = [tool for tool in ("cmake", "make", "c++") if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"cannot build googletest binaries: {missing} not found")
+    capabilities.require(capabilities.GTEST)
     source = tmp_path_factory.mktemp("gtest_src")
     (source / "CMakeLists.txt").write_text(CMAKE_LISTS)
     for name, text in GTEST_SOURCES.items():

@@ -11,8 +11,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
-from conftest import run_cli, run_runner
-from test_ament_contract import load_result
+from helpers.commands import run_cli, run_runner
+from helpers.results import load_result
 
 ERROR_PREFIX = "ros-isolated-test: error: "
 MODES = ["shell", "runner"]

@@ -254,6 +254,7 @@ def test_json_has_the_same_numbers_and_the_failed_cases(tree: Tree, env: dict[st
     assert (totals["tests"], totals["errors"], totals["failures"], totals["skipped"]) == (
         summary_of(plain.stdout)
     )
+    assert any(row["failed_cases"] for row in data["files"]), data  # else the loop checks none
     for row in data["files"]:
         assert len(row["failed_cases"]) == row["errors"] + row["failures"], row
         for case in row["failed_cases"]:

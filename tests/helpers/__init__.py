@@ -1,5 +1,9 @@
-"""Shared test helpers: capability markers, process and scene builders, and helper programs.
+"""Shared test helpers: one module per job, imported by test modules as ``from helpers...``.
 
-Test modules import from here (and from ``conftest``), never from each other. The
-``*.py`` programs here are run as processes by the tests (talkers, listeners).
+Among them: commands (where the CLI and RUNNER are, running them), results (reading result files),
+canonical (what a canonical result file is), domains (picking free IDs), processes (child
+processes of a test), workspace (the example colcon package, built once per session),
+capabilities (the only way to skip). Test modules import from here, never from each other
+and never from ``conftest``, which holds fixtures only. The other ``*.py`` here are
+programs the tests run as processes (talkers, listeners).
 """

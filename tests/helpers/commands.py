@@ -1,0 +1,70 @@
+"""Where the suite's programs are, and how tests run the CLI and the RUNNER as real processes.
+
+Every test that starts ``ros-isolated-test`` or the ctest RUNNER goes through here, so all
+of them run the same installed entry points with the same timeout and captured text.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+#: The virtualenv's bin/, where the CLI, colcon and the test tools are installed.
+BIN = Path(sys.executable).parent
+CLI = str(BIN / "ros-isolated-test")
+#: Variables that would change what the runner decides; tests set them explicitly.
+POLICY_VARS = (
+    "ROS_DOMAIN_ID",
+    "DISABLE_ROS_ISOLATION",
+    "ROS_ISOLATED_TEST_DOMAINS",
+    "ROS_ISOLATED_TEST_LOCK_DIR",
+)
+#: Only stops a hung test; no test's verdict depends on it.
+HUNG = 120
+
+
+def run_cli(
+    args: Sequence[str], env: Mapping[str, str], **kwargs: object
+) -> subprocess.CompletedProcess[str]:
+    """``ros-isolated-test ARGS`` as a real process, output captured as text."""
+    return subprocess.run(  # type: ignore[call-overload, no-any-return]
+        [CLI, *args],
+        check=False,
+        env=dict(env),
+        capture_output=True,
+        text=True,
+        timeout=HUNG,
+        **kwargs,
+    )
+
+
+def run_runner(
+    runner_script: str, args: Sequence[str], env: Mapping[str, str], **kwargs: object
+) -> subprocess.CompletedProcess[str]:
+    """The RUNNER script exactly as ctest calls it: ``python3 -u <script> ARGS``."""
+    return subprocess.run(  # type: ignore[call-overload, no-any-return]
+        [sys.executable, "-u", runner_script, *args],
+        check=False,
+        env=dict(env),
+        capture_output=True,
+        text=True,
+        timeout=HUNG,
+        **kwargs,
+    )
+
+
+def ament(
+    runner_script: str,
+    result: Path,
+    command: Sequence[str],
+    env: Mapping[str, str],
+    *options: str,
+    cwd: Path,
+    package: str = "pkg",
+) -> subprocess.CompletedProcess[str]:
+    """``python3 -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest runs it."""
+    args = [str(result), "--package-name", package, *options, "--command", *command]
+    return run_runner(runner_script, args, env, cwd=cwd)

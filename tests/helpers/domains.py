@@ -1,0 +1,53 @@
+"""Picking domain IDs for a test: ones nobody on this machine uses right now.
+
+Ports 32768+ID and the processes' environments are machine-wide, and other runners hold
+IDs in the default lock directory, so a test never assumes an ID is free: it takes IDs
+whose lock, port and environment are all unused now, from 215-232 where it can (outside
+the default pool and upstream's 1-100, where other runs on this machine rarely are).
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+
+import pytest
+
+from ros_isolated_test.domain_coordinator import squatters
+from ros_isolated_test.domain_coordinator.lock_dir import lock_dir_from_env
+from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
+from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
+from ros_isolated_test.domain_coordinator.reservation import probe_lock
+
+HIGH_IDS = range(215, HIGHEST_VALID_ID + 1)
+
+
+def in_use(domain_id: int, squatted: set[int]) -> bool:
+    """Held by a runner (default or current lock dir), its port bound, or squatted."""
+    if domain_id in squatted or port_is_taken(domain_id):
+        return True
+    lock_dirs = {lock_dir_from_env({}), lock_dir_from_env()}
+    return any(path.is_dir() and probe_lock(path, domain_id) for path in lock_dirs)
+
+
+def free_ids(count: int, candidates: Sequence[int] = HIGH_IDS) -> list[int]:
+    """``count`` IDs free now, at random: from ``candidates`` first, then any other valid ID.
+
+    Not finding them is a failure, never a skip: a machine with fewer than ``count`` of
+    232 IDs free is not a missing capability.
+    """
+    # In random order: other sessions of this suite pick beside us at the same moment, and
+    # all taking the first free IDs would collide between the check and the reservation.
+    others = [i for i in range(1, HIGHEST_VALID_ID + 1) if i not in candidates]
+    everything = [
+        *random.sample(list(candidates), len(candidates)),
+        *random.sample(others, len(others)),
+    ]
+    squatted = set(squatters.scan(set(everything)))
+    free: list[int] = []
+    for domain_id in everything:
+        if not in_use(domain_id, squatted):
+            free.append(domain_id)
+            if len(free) == count:
+                return free
+    pytest.fail(f"only {len(free)} domain IDs are free on this machine, {count} needed")

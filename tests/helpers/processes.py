@@ -1,0 +1,102 @@
+"""Child processes of a test: started, read, told to finish through stdin, always killed.
+
+Tests that hold IDs in other processes (holders, waiters, other users' runners) use one
+``Children`` each (the ``children`` fixture), so nothing a test started outlives it.
+"""
+
+from __future__ import annotations
+
+import pwd
+import select
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TypedDict
+
+import pytest
+
+#: Only stops a hung test: how long to wait for a child that should answer at once.
+DEADLINE = 60.0
+
+#: A test command: writes its PID, then waits for a file or its deadline. argv: pid file, go.
+WAIT_SCRIPT = """
+import os, sys, time
+from pathlib import Path
+Path(sys.argv[1]).write_text(str(os.getpid()))
+deadline = time.monotonic() + 60
+while not Path(sys.argv[2]).exists() and time.monotonic() < deadline:
+    time.sleep(0.02)
+"""
+
+
+class Children:
+    """Child processes of one test, each controlled through its stdin; all killed at the end."""
+
+    def __init__(self) -> None:
+        self.processes: list[subprocess.Popen[str]] = []
+
+    def start(self, args: Sequence[str], **kwargs: object) -> subprocess.Popen[str]:
+        process: subprocess.Popen[str] = subprocess.Popen(  # type: ignore[call-overload]
+            list(args),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            **kwargs,
+        )
+        self.processes.append(process)
+        return process
+
+    def python(self, script: str, *args: object, **kwargs: object) -> subprocess.Popen[str]:
+        return self.start([sys.executable, "-c", script, *map(str, args)], **kwargs)
+
+    def first_line(self, process: subprocess.Popen[str]) -> str:
+        """The child's first line of output, or a failure showing why it never came."""
+        assert process.stdout is not None
+        ready, _, _ = select.select([process.stdout], [], [], DEADLINE)
+        line = process.stdout.readline() if ready else ""
+        if not line:
+            process.kill()
+            _, stderr = process.communicate(timeout=DEADLINE)
+            pytest.fail(f"child {process.args!r} printed nothing; stderr:\n{stderr}")
+        return line.strip()
+
+    def finish(self, process: subprocess.Popen[str]) -> int:
+        """Close its stdin (the signal to let go) and wait for it."""
+        assert process.stdin is not None
+        process.stdin.close()
+        return process.wait(timeout=DEADLINE)
+
+    def kill_all(self) -> None:
+        for process in self.processes:
+            if process.poll() is None:
+                process.kill()
+            process.wait(timeout=DEADLINE)
+            for stream in (process.stdin, process.stdout, process.stderr):
+                if stream is not None:
+                    stream.close()
+
+
+def wait_for(path: Path, timeout: float = DEADLINE) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        if time.monotonic() > deadline:
+            pytest.fail(f"{path} did not appear within {timeout} s")
+        time.sleep(0.02)
+
+
+class UserKeywords(TypedDict):
+    """What ``subprocess`` needs to run a child as another user."""
+
+    user: int
+    group: int
+    extra_groups: list[int]
+    cwd: str
+
+
+def user_keywords(uid: int) -> UserKeywords:
+    """``subprocess`` keywords that run a child as user ``uid``, in its own group only."""
+    entry = pwd.getpwuid(uid)
+    return {"user": uid, "group": entry.pw_gid, "extra_groups": [], "cwd": "/"}

@@ -1,0 +1,96 @@
+"""The example package (examples/crosstalk_demo) built once per session, tested many times.
+
+The demo's own helpers (examples/crosstalk_workspace.py) build and run it, so the demo and
+the tests check exactly the same thing. A build per runner is configured once per session
+(the runner is baked into CTestTestfile.cmake); every test then runs ``colcon test`` on
+that build, after clearing what an earlier run left in it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+from helpers.commands import REPO
+
+if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
+    from examples.crosstalk_workspace import Run
+
+
+def crosstalk_workspace() -> ModuleType:
+    """``examples/crosstalk_workspace.py`` (examples/ is no package), loaded once by path."""
+    loaded = sys.modules.get("crosstalk_workspace")
+    if loaded is not None:
+        return loaded
+    path = REPO / "examples" / "crosstalk_workspace.py"
+    spec = importlib.util.spec_from_file_location("crosstalk_workspace", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while being created
+    spec.loader.exec_module(module)
+    return module
+
+
+class CrosstalkBuilds:
+    """The session's builds of the example package, one per runner, each made on first use."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.ws = crosstalk_workspace()
+        self._bases: dict[str, Path] = {}
+        self.builds = 0  # colcon builds made, so a test can prove there was only one each
+
+    def base(self, runner: str) -> Path:
+        """The build of the package for ``runner`` (built now if this is the first ask)."""
+        if runner not in self._bases:
+            if runner == "isolated" and (problem := self.ws.isolated_runner_problem()):
+                raise AssertionError(f"ros-isolated-test's runner is not available: {problem}")
+            self._bases[runner] = self.ws.build(self.root, runner)
+            self.builds += 1
+        return self._bases[runner]
+
+    def fresh(self, runner: str) -> Path:
+        """The build for ``runner``, with no result file or record of an earlier test run."""
+        base = self.base(runner)
+        package: str = self.ws.PACKAGE
+        for stale in (base / "build" / package / "test_results").glob("**/*.xml"):
+            stale.unlink()
+        for stale in (base / "records").glob("*.json"):
+            stale.unlink()
+        return base
+
+    def test(self, runner: str, jobs: int = 6) -> Run:
+        """``colcon test --ctest-args -jJOBS`` on the session's build, as ``ws.run`` does it.
+
+        Reads the environment of this process at call time (pool, lock dir), like
+        ``ws.run``; only the build step is skipped, since the session made it already.
+        """
+        ws = self.ws
+        base = self.fresh(runner)
+        record_dir = base / "records"
+        record_dir.mkdir(exist_ok=True)
+        _, test_output = ws._colcon(
+            ["--log-base", str(base / "log"), "test", *ws._common(base), "--ctest-args",
+             f"-j{jobs}"],
+            cwd=self.root,
+            extra_env={"CROSSTALK_RECORD_DIR": str(record_dir)},
+        )  # fmt: skip
+        runner_path, tokens = ws.registered_tests(base)
+        records = ws.read_records(record_dir)
+        cases = tuple(
+            ws.Case(name, token, records.get(token)) for name, token in sorted(tokens.items())
+        )
+        run: Run = ws.Run(
+            runner=runner,
+            runner_path=runner_path,
+            base=base,
+            build_seconds=0.0,
+            test_seconds=0.0,
+            test_output=test_output,
+            cases=cases,
+            result=ws.result_summary(base),
+        )
+        return run
