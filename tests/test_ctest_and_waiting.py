@@ -620,11 +620,11 @@ def test_the_waiting_line_is_refreshed_with_the_new_holder(
 ) -> None:
     """The holder changes while the waiter waits; its next line (every 10 s) says so.
 
-    It waits 25 s: lines at 0, 10 and 20 s, each well before it gives up.
+    It waits 16 s: lines at 0 and 10 s, the second 6 s before it gives up (not 1 s).
     """
     first = tenants.holding()
     second = tenants.queued("--wait-timeout", "60", hold=True)
-    waiter = tenants.queued("--wait-timeout", "25")
+    waiter = tenants.queued("--wait-timeout", "16")
     first.release()
     _poll(second.got_id, 60, "the first waiter did not get the ID when it came free")
     code = waiter.process.wait(timeout=120)
