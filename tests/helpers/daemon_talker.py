@@ -20,7 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-from token_exchange import PERIOD_S, publishing
+# Run as a program: its folder is on sys.path, the folder holding `helpers` is not.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from helpers.token_exchange import PERIOD_S, publishing
 
 MAX_LIFE_S = 120.0
 START_DEADLINE_S = 30.0

@@ -17,7 +17,9 @@ import json
 import sys
 from pathlib import Path
 
-from token_exchange import exchange
+# Run as a program: its folder is on sys.path, the folder holding `helpers` is not.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from helpers.token_exchange import exchange
 
 
 def alive(pid: int) -> bool:
