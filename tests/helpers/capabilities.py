@@ -1,7 +1,7 @@
 """Named capability markers: the only way a test of this suite may be skipped.
 
-A test skips only when the machine lacks something it needs (root, ``unshare``, a Docker
-engine, the outside tier beside the checkout), never because the product failed: a
+A test skips only when the machine lacks something it needs (root, ``unshare``, namespaces,
+the outside tier beside the checkout), never because the product failed: a
 product error fails the test. Each marker says what is missing and how to get it, so the
 ``-rs`` summary explains every skip. In strict mode (``pytest --no-skips``, which
 ``.ci/run`` uses) any skip fails the run instead.
@@ -111,15 +111,6 @@ def _network_namespaces() -> str | None:
     failed = _run_ok(["unshare", "--net", "ip", "link", "set", "lo", "up"])
     if failed is not None:
         return f"cannot make a network namespace here (CAP_SYS_ADMIN, CAP_NET_ADMIN): {failed}"
-    return None
-
-
-def _docker() -> str | None:
-    if shutil.which("docker") is None:
-        return "needs the docker command and a running Docker engine"
-    failed = _run_ok(["docker", "info", "--format", "{{.ServerVersion}}"])
-    if failed is not None:
-        return f"needs a running Docker engine (`docker info` failed: {failed.splitlines()[0]})"
     return None
 
 
@@ -285,7 +276,6 @@ ROOT = Capability("root", _root)
 UNSHARE = Capability("unshare", _unshare)
 MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
 NETWORK_NAMESPACES = Capability("network-namespaces", _network_namespaces)
-DOCKER = Capability("docker", _docker)
 OTHER_USERS = Capability("other-users", _other_users)
 SETUID_HELPER = Capability("setuid-helper", _setuid_helper)
 IPV6 = Capability("ipv6", _ipv6)
