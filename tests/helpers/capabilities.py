@@ -3,8 +3,8 @@
 A test skips only when the machine lacks something it needs (root, ``unshare``, namespaces,
 the outside tier beside the checkout), never because the product failed: a
 product error fails the test. Each marker says what is missing and how to get it, so the
-``-rs`` summary explains every skip. In strict mode (``pytest --no-skips``, which
-``.ci/run`` uses) any skip fails the run instead.
+``-rs`` summary explains every skip. In strict mode (``ROS_ISOLATED_TEST_NO_SKIPS=1``,
+which ``.ci/run`` sets, or ``pytest --no-skips``) any skip fails the run instead.
 
 Use: ``@capabilities.ROOT`` on a test, or ``pytestmark = [capabilities.UNSHARE]``; for a
 need found only at run time, ``capabilities.require(capabilities.ROOT)`` inside it.
