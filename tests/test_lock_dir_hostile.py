@@ -418,6 +418,9 @@ def test_a_queue_planted_as_a_file_does_not_deny_a_waiting_runner(
             [CLI, "run", "--wait-timeout", "30", "--", "sh", "-c", PRINT_ID],
             env=shared_env(env, lock_dir, first),
         )
+        # It says once that it queues in a folder of its own, naming the planted path.
+        note = children.first_line(waiter)
+        assert f"shared queue folder {lock_dir / 'queue'} is unusable" in note, note
         assert "waiting for a free ROS_DOMAIN_ID" in children.first_line(waiter)
     finally:
         reservation.release()

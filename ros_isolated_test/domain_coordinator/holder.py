@@ -1,4 +1,9 @@
-"""Who holds a domain ID: the record a holder leaves beside its lock for ``status``."""
+"""Who holds a domain ID: the record a holder leaves beside its lock for ``status``.
+
+Records live in a directory every user may write to, so a record read back is
+untrusted: it is kept only when its PID and time are in range, and its text fields
+are made display-safe (no control character can forge a line or drive a terminal).
+"""
 
 from __future__ import annotations
 
@@ -17,6 +22,13 @@ from ros_isolated_test.atomic_file import write_atomically
 _JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
     code: f"\\u{code:04x}" for code in range(0x20)
 }
+#: The kernel's ceiling for pid_max (PID_MAX_LIMIT on 64-bit), when /proc does not say.
+PID_MAX_LIMIT = 1 << 22
+#: Latest time a record may carry: the end of year 9999, which every strftime can show.
+LATEST_TIME = 253402300799.0
+#: Longest text shown for a record's command (user and host: :data:`SHORT_TEXT`).
+LONG_TEXT = 2000
+SHORT_TEXT = 256
 
 
 class Holder:
@@ -36,8 +48,8 @@ class Holder:
 
     @property
     def started_iso(self) -> str:
-        """Local start time, to the second."""
-        return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(self.started))
+        """Local start time, to the second ("-" when unknown)."""
+        return iso_time(self.started)
 
     def as_dict(self) -> dict[str, object]:
         """The record's fields, as ``status --json`` and the record file carry them."""
@@ -75,6 +87,80 @@ def json_string(text: str) -> str:
     return f'"{escaped}"'
 
 
+def iso_time(when: float) -> str:
+    """Local time to the second, or "-" for a time no record of a real runner carries."""
+    if not 0.0 < when <= LATEST_TIME:  # also NaN
+        return "-"
+    try:
+        return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(when))
+    except (OverflowError, OSError, ValueError):
+        return "-"
+
+
+def display_text(text: str, limit: int = LONG_TEXT) -> str:
+    r"""``text`` safe to print on one line: every non-printable character as an escape.
+
+    A control character (``\r``, ``\n``, ``\x1b``...) from a planted record could forge
+    a line of ``status`` or drive a terminal; it is shown as ``\xNN`` (``\uNNNN``
+    beyond), a byte that was not UTF-8 (a lone surrogate) as ``\xNN`` of that byte.
+    Longer texts keep their first ``limit`` characters and say how many were cut.
+    """
+    if len(text) > limit:
+        text = f"{text[:limit]}... ({len(text) - limit} more characters)"
+    if text.isprintable():
+        return text
+    return "".join(char if char.isprintable() else _escape(char) for char in text)
+
+
+def _escape(char: str) -> str:
+    code = ord(char)
+    if 0xDC80 <= code <= 0xDCFF:  # surrogateescape's stand-in for an undecodable byte
+        code -= 0xDC00
+    if code <= 0xFF:
+        return f"\\x{code:02x}"
+    return f"\\u{code:04x}" if code <= 0xFFFF else f"\\U{code:08x}"
+
+
+def pid_max() -> int:
+    """The kernel's pid_max: every real PID is below it."""
+    try:
+        with open("/proc/sys/kernel/pid_max", "rb") as file:
+            return min(int(file.read(32)), PID_MAX_LIMIT)
+    except (OSError, ValueError):
+        return PID_MAX_LIMIT
+
+
+def record_pid(value: object, limit: int | None = None) -> int | None:
+    """A record's PID when it could be a real one (an int from 1 to below pid_max)."""
+    if type(value) is not int:  # not a bool, not a float such as 1e400
+        return None
+    return value if 0 < value < (pid_max() if limit is None else limit) else None
+
+
+def record_time(value: object) -> float | None:
+    """A record's time when it is one a real runner writes (finite, from 1970 to 9999)."""
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        return None
+    # Compared before any conversion: float() of a 400-digit int raises OverflowError.
+    return float(value) if 0 < value <= LATEST_TIME else None
+
+
+def record_text(value: object, limit: int = SHORT_TEXT) -> str | None:
+    """A record's text field, display-safe, or None when it is no string."""
+    return display_text(value, limit) if isinstance(value, str) else None
+
+
+def parse_record(text: str) -> dict[str, object] | None:
+    """A record file's JSON object, or None for anything else a planted file may hold."""
+    import json
+
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError):  # bad JSON, digits beyond int limits, deep nesting
+        return None
+    return data if isinstance(data, dict) else None
+
+
 def current_user() -> str:
     """The user name, or the numeric UID where the passwd database lacks it (containers)."""
     uid = os.getuid()
@@ -110,25 +196,30 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
 
 
 def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:
-    """Every readable record for the ID, newest first; unreadable ones are skipped."""
-    import json
+    """Every valid record for the ID, newest first, display-safe; the others are skipped.
 
+    Valid: a JSON object of this ID, with a PID below pid_max, a time from 1970 to 9999
+    and text fields, as :func:`write_record` writes it. Anything else was planted.
+    """
     holders: list[Holder] = []
+    limit = pid_max()
     for path in lock_dir.glob(f"domain-{domain_id}.uid*.holder.json"):
         try:
-            data = json.loads(read_small_file(path))
-            holders.append(
-                Holder(
-                    domain_id=int(data["domain_id"]),
-                    pid=int(data["pid"]),
-                    user=str(data["user"]),
-                    command=str(data["command"]),
-                    started=float(data["started"]),
-                    host=str(data.get("host", "")),
-                )
-            )
-        except (OSError, ValueError, KeyError, TypeError):
+            data = parse_record(read_small_file(path))
+        except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8
             continue
+        if data is None or type(data.get("domain_id")) is not int:
+            continue
+        if data["domain_id"] != domain_id:
+            continue
+        pid = record_pid(data.get("pid"), limit)
+        started = record_time(data.get("started"))
+        user = record_text(data.get("user"))
+        command = record_text(data.get("command"), LONG_TEXT)
+        host = record_text(data.get("host", ""))
+        if pid is None or started is None or user is None or command is None or host is None:
+            continue
+        holders.append(Holder(domain_id, pid, user, command, started, host))
     holders.sort(key=lambda holder: holder.started, reverse=True)
     return holders
 

@@ -8,6 +8,11 @@ A ticket holds a small record of its waiter (PID, command, since when) for ``sta
 The directory is shared and hostile: the record is written into a file we just created
 (never through a link), read back only from regular files, size-bounded, and the user
 shown is the file's owner, which nobody can fake.
+
+The shared queue folder can be planted too (a file, a symlink, another user's folder
+others may not write or may empty): a runner then queues in a folder of its own user
+(``queue.uid<UID>``), as it falls back to a lock file of its own, and says so. Every
+runner reads every such folder, so arrival order holds across all of them.
 """
 
 from __future__ import annotations
@@ -23,26 +28,39 @@ from pathlib import Path
 
 from ros_isolated_test.domain_coordinator.flock import try_lock, wait_lock
 from ros_isolated_test.domain_coordinator.holder import (
+    LATEST_TIME,
+    LONG_TEXT,
+    SHORT_TEXT,
+    display_text,
+    iso_time,
     json_string,
     owned_file,
+    parse_record,
+    pid_max,
     read_small_file,
+    record_pid,
+    record_text,
+    record_time,
 )
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError, ensure_lock_dir
 
 QUEUE_DIR = "queue"
+_TICKET = ".ticket"
 
 
 class Ticket:
     """A runner's place in the queue, held until it gets an ID or gives up."""
 
-    def __init__(self, queue: Queue, name: str, fd: int) -> None:
+    def __init__(self, queue: Queue, path: Path, fd: int) -> None:
         self.queue = queue
-        self.name = name
+        self.path = path
+        #: Names sort by arrival time, whichever folder holds them.
+        self.name = path.name
         self.fd = fd
 
     def ahead(self) -> int:
-        """Live tickets older than this one."""
-        return sum(1 for name in self.queue.live_tickets() if name < self.name)
+        """Live tickets older than this one, in every queue folder."""
+        return sum(1 for path in self.queue.live_tickets() if path.name < self.name)
 
 
 class Waiter:
@@ -63,8 +81,8 @@ class Waiter:
 
     @property
     def since_iso(self) -> str:
-        """Local time the runner started waiting, to the second."""
-        return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(self.since))
+        """Local time the runner started waiting, to the second ("-" when unknown)."""
+        return iso_time(self.since)
 
     def as_dict(self) -> dict[str, object]:
         """The fields ``status --json`` shows."""
@@ -97,39 +115,91 @@ def _user_of(uid: int) -> str:
     import pwd
 
     try:
-        return pwd.getpwuid(uid).pw_name
+        return display_text(pwd.getpwuid(uid).pw_name, SHORT_TEXT)
     except KeyError:
         return str(uid)
+
+
+def _from_name(name: str) -> tuple[int, float]:
+    """The PID and arrival time a ticket's name holds (0 for what it does not hold)."""
+    arrived, _dash, pid_text = name[: -len(_TICKET)].partition("-")
+    pid = 0
+    if pid_text.isascii() and pid_text.isdigit():  # int() refuses some other digits
+        pid = record_pid(int(pid_text)) or 0
+    since = 0.0
+    if arrived.isascii() and arrived.isdigit():
+        nanoseconds = int(arrived)
+        # Compared first: a 200-digit number divided into a float raises OverflowError.
+        if 0 < nanoseconds <= LATEST_TIME * 1e9:
+            since = nanoseconds / 1e9
+    return pid, since
+
+
+def _unusable(path: Path, own: bool) -> str | None:
+    """Why ``path`` cannot take our tickets, or None when it can.
+
+    Our own folder must be ours. The shared one may be anyone's (the first runner to
+    queue creates it), but then with the sticky bit, like /tmp: without it anyone could
+    remove our tickets.
+    """
+    try:
+        info = os.lstat(path)
+    except OSError as error:
+        return error.strerror or "cannot be read"
+    if stat.S_ISLNK(info.st_mode):
+        return "a symlink"
+    if not stat.S_ISDIR(info.st_mode):
+        return "not a directory"
+    if info.st_uid != os.getuid() and (own or not info.st_mode & stat.S_ISVTX):
+        return "a directory of another user" + ("" if own else " without the sticky bit")
+    if not os.access(path, os.W_OK | os.X_OK, follow_symlinks=False):
+        return "not writable by this user"
+    return None
 
 
 class Queue:
     """The waiting runners of one lock directory."""
 
     def __init__(self, lock_dir: Path) -> None:
+        self.lock_dir = lock_dir
+        #: The shared queue folder, and this user's own for when it was planted.
         self.path = lock_dir / QUEUE_DIR
+        self.own_path = lock_dir / f"{QUEUE_DIR}.uid{os.getuid()}"
+        #: Set by :meth:`ticket` when the shared folder was unusable: one line to show.
+        self.problem: str | None = None
 
-    def usable(self) -> bool:
-        """Whether the queue folder is a real folder (never followed through a link)."""
-        try:
-            return stat.S_ISDIR(os.lstat(self.path).st_mode)
-        except OSError:
-            return False
-
-    def live_tickets(self) -> list[str]:
-        """Names of the tickets whose waiter is alive; our own dead ones are removed."""
-        live: list[str] = []
-        if not self.usable():
-            return live
+    def folders(self) -> list[Path]:
+        """Every queue folder: the shared one and each user's own (never through a link)."""
+        found = [self.path]
         with contextlib.suppress(OSError):
-            for entry in os.scandir(self.path):
-                if not entry.name.endswith(".ticket"):
-                    continue
-                if self._held(Path(entry.path)):
-                    live.append(entry.name)
-                elif owned_file(Path(entry.path)):
-                    with contextlib.suppress(OSError):
-                        os.unlink(entry.path)
-        return sorted(live)
+            prefix = f"{QUEUE_DIR}.uid"
+            for entry in os.scandir(self.lock_dir):
+                if entry.name.startswith(prefix):
+                    found.append(Path(entry.path))
+        return [path for path in found if _is_directory(path)]
+
+    def live_tickets(self) -> list[Path]:
+        """The tickets whose waiter is alive, first come first; our own dead ones are removed."""
+        live: list[Path] = []
+        for folder in self.folders():
+            with contextlib.suppress(OSError):
+                for entry in os.scandir(folder):
+                    if not entry.name.endswith(_TICKET):
+                        continue
+                    path = Path(entry.path)
+                    if self._held(path):
+                        live.append(path)
+                    elif owned_file(path):
+                        with contextlib.suppress(OSError):
+                            os.unlink(path)
+        return sorted(live, key=lambda path: path.name)
+
+    def shared_problem(self) -> str | None:
+        """Why the shared queue folder cannot be used, for ``status`` (None: it can)."""
+        if not os.path.lexists(self.path):
+            return None  # the first runner to queue creates it
+        why = _unusable(self.path, own=False)
+        return None if why is None else _fallback_note(self.path, why, self.own_path)
 
     def waiters(self) -> list[Waiter]:
         """Every live waiter, first in line first.
@@ -137,25 +207,25 @@ class Queue:
         A ticket without a readable record still counts: its name holds the PID and
         the arrival time.
         """
-        import json
-
         found: list[Waiter] = []
-        for position, name in enumerate(self.live_tickets(), start=1):
-            path = self.path / name
-            arrived, _dash, pid_text = name[: -len(".ticket")].partition("-")
-            pid = int(pid_text) if pid_text.isdigit() else 0
-            since = int(arrived) / 1e9 if arrived.isdigit() else 0.0
+        limit = pid_max()
+        for position, path in enumerate(self.live_tickets(), start=1):
+            pid, since = _from_name(path.name)
             command, host = "(no record)", ""
             try:
                 owner = _user_of(os.lstat(path).st_uid)
             except OSError:
                 continue  # gone meanwhile: it got its ID
-            with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
-                data = json.loads(read_small_file(path))
-                command = str(data["command"])
-                host = str(data.get("host", ""))
-                pid = int(data["pid"])
-                since = float(data["started"])
+            try:
+                data = parse_record(read_small_file(path))
+            except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8
+                data = None
+            if data is not None:
+                # Field by field: a planted record cannot make a valid field disappear.
+                command = record_text(data.get("command"), LONG_TEXT) or command
+                host = record_text(data.get("host")) or host
+                pid = record_pid(data.get("pid"), limit) or pid
+                since = record_time(data.get("started")) or since
             found.append(Waiter(position, pid, owner, command, since, host))
         return found
 
@@ -184,19 +254,51 @@ class Queue:
         """Take a place at the end of the queue for the ``with`` block.
 
         ``command`` is recorded in the ticket for ``status`` (default: this process's
-        own command line). Yields None when the queue folder is unusable (something
-        planted there): the runner then still waits, only without the
+        own command line). When the shared folder is unusable (something planted there)
+        the ticket goes into this user's own folder and :attr:`problem` says so; when
+        that fails too, it yields None: the runner then still waits, only without the
         first-come-first-served order.
         """
-        fd: int | None = None
-        staging: Path | None = None
+        name = f"{time.time_ns():020d}-{os.getpid()}{_TICKET}"
+        why = self._prepare(self.path, own=False)
+        held = self._take(self.path / name, command) if why is None else None
+        if held is None:
+            why = why or "tickets cannot be created in it"
+            own_why = self._prepare(self.own_path, own=True)
+            held = self._take(self.own_path / name, command) if own_why is None else None
+            self.problem = _fallback_note(self.path, why, self.own_path if held else None)
+        if held is None:
+            yield None
+            return
+        path, fd = held
         try:
-            ensure_lock_dir(self.path)
-            name = f"{time.time_ns():020d}-{os.getpid()}.ticket"
-            path = self.path / name
-            # Locked under a name nobody looks at, then renamed into the queue: an
-            # unlocked ticket would look dead and could be removed by another runner.
-            staging = self.path / f".{name}.new"
+            yield Ticket(self, path, fd)
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+            os.close(fd)
+
+    @staticmethod
+    def _prepare(folder: Path, own: bool) -> str | None:
+        """Create the folder if missing; why it cannot take our tickets, or None."""
+        try:
+            if own:
+                with contextlib.suppress(FileExistsError):
+                    os.mkdir(folder, 0o755)  # others read it: tickets must be seen held
+            else:
+                ensure_lock_dir(folder)  # shared: mode 1777, like the lock directory
+        except (OSError, LockDirError):
+            pass  # _unusable says what is wrong
+        return _unusable(folder, own)
+
+    @staticmethod
+    def _take(path: Path, command: Sequence[str] | None) -> tuple[Path, int] | None:
+        """A locked ticket at ``path`` with our record: (path, descriptor), or None."""
+        fd: int | None = None
+        # Locked under a name nobody looks at, then renamed into the queue: an
+        # unlocked ticket would look dead and could be removed by another runner.
+        staging = path.with_name(f".{path.name}.new")
+        try:
             fd = os.open(
                 staging, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644
             )
@@ -208,17 +310,30 @@ class Queue:
                 os.write(fd, _record(command))
             wait_lock(fd)
             os.rename(staging, path)
-        except (OSError, LockDirError):
+        except OSError:
             if fd is not None:
                 os.close(fd)
-            if staging is not None:
                 with contextlib.suppress(OSError):
                     os.unlink(staging)
-            yield None
-            return
-        try:
-            yield Ticket(self, name, fd)
-        finally:
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-            os.close(fd)
+            return None
+        return path, fd
+
+
+def _is_directory(path: Path) -> bool:
+    try:
+        return stat.S_ISDIR(os.lstat(path).st_mode)
+    except OSError:
+        return False
+
+
+def _fallback_note(shared: Path, why: str, own: Path | None) -> str:
+    """One line naming the planted path and what the runners do about it."""
+    where = (
+        f"runners of this user queue in {own} instead (first come, first served among them)"
+        if own is not None
+        else "runners wait without first come, first served"
+    )
+    return (
+        f"the shared queue folder {display_text(str(shared), SHORT_TEXT)} is unusable "
+        f"({why}; planted?): {where}; remove it to restore the shared queue"
+    )

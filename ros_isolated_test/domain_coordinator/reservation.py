@@ -427,6 +427,8 @@ class DomainCoordinator:
         start = time.monotonic()
         told = 0.0
         with queue.ticket(command) as ticket:
+            if queue.problem is not None and on_wait is not None:
+                on_wait(queue.problem)  # once: the planted path, and what we do instead
             while True:
                 waited = time.monotonic() - start
                 ahead = ticket.ahead() if ticket is not None else 0

@@ -6,6 +6,10 @@ it in ROS_DOMAIN_ID (a test that outlived its runner, a shell's export): a squat
 or while a block record names a live survivor of its last test (one the runner could
 not end).
 Runners waiting for an ID (their tickets in the queue) are listed apart.
+
+Everything shown comes display-safe from here: records are validated as they are read
+(see ``holder``), and a squatter's or survivor's command line, which any process can
+set, has its control characters escaped like a record's.
 """
 
 from __future__ import annotations
@@ -66,8 +70,8 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                     holder.Holder(
                         domain_id=domain_id,
                         pid=squatter.pid,
-                        user=squatter.user,
-                        command=squatter.command,
+                        user=holder.display_text(squatter.user, holder.SHORT_TEXT),
+                        command=holder.display_text(squatter.command),
                         started=squatter.started,
                         host="",
                     ),
@@ -86,8 +90,8 @@ def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
     return holder.Holder(
         domain_id=domain_id,
         pid=survivor.pid,
-        user=user,
-        command=proc.cmdline(survivor.pid) or f"({survivor.name})",
+        user=holder.display_text(user, holder.SHORT_TEXT),
+        command=holder.display_text(proc.cmdline(survivor.pid) or f"({survivor.name})"),
         started=proc.started_at(survivor),
         host="",
     )
@@ -96,6 +100,16 @@ def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
 def waiting_runners(lock_dir: Path) -> list[queue.Waiter]:
     """Runners queued for an ID (first come, first served), the next to get one first."""
     return queue.Queue(lock_dir).waiters()
+
+
+def queue_notes(lock_dir: Path) -> list[str]:
+    """What is wrong with the queue, one line each (none when it is healthy).
+
+    A planted shared queue folder sends runners to per-user folders: still first come,
+    first served, but ``status`` says so, since whoever planted it should be found.
+    """
+    problem = queue.Queue(lock_dir).shared_problem()
+    return [problem] if problem else []
 
 
 def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> str:

@@ -1,0 +1,242 @@
+"""The queue of waiting runners against a hostile lock directory.
+
+A planted ``queue`` entry (a file, a symlink, another user's folder) must not turn off
+first come, first served: runners queue in a folder of their own user instead and say
+so. A planted ticket record must not break ``status`` or a waiting runner.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import subprocess
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from helpers import capabilities
+from helpers.commands import CLI, HUNG, run_cli
+from helpers.domains import free_ids
+
+from ros_isolated_test.domain_coordinator import status
+
+DEADLINE = 60.0
+NOBODY = 65534
+WAITERS = 5
+NOTE = "the shared queue folder"
+FORGED = "FORGED-LINE"
+
+
+def _poll(condition: Callable[[], bool], what: str) -> None:
+    end = time.monotonic() + DEADLINE
+    while not condition():
+        assert time.monotonic() < end, what
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def one_id(env: dict[str, str]) -> dict[str, str]:
+    (domain_id,) = free_ids(1)
+    return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
+
+
+@pytest.fixture
+def started() -> Iterator[list[subprocess.Popen[bytes]]]:
+    processes: list[subprocess.Popen[bytes]] = []
+    yield processes
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+        process.wait(HUNG)
+
+
+def _start(
+    args: list[str], env: dict[str, str], log: Path, into: list[subprocess.Popen[bytes]]
+) -> subprocess.Popen[bytes]:
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [CLI, *args], env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=out
+        )
+    into.append(process)
+    return process
+
+
+def _tickets(lock_dir: Path) -> list[Path]:
+    """Every ticket in any queue folder (shared or per user), never through a link."""
+    return [
+        ticket
+        for folder in lock_dir.glob("queue*")
+        if folder.is_dir() and not folder.is_symlink()
+        for ticket in folder.glob("*.ticket")
+    ]
+
+
+def _hold(env: dict[str, str], tmp_path: Path, into: list[subprocess.Popen[bytes]]) -> Path:
+    """A real runner holding the pool's one ID until the returned file exists."""
+    go, got = tmp_path / "go", tmp_path / "holding"
+    script = f"touch {got}; while [ ! -e {go} ]; do sleep 0.05; done"
+    holder = _start(["run", "--", "sh", "-c", script], env, tmp_path / "holder.log", into)
+    _poll(lambda: got.exists() or holder.poll() is not None, "the holder never ran")
+    assert got.exists(), (tmp_path / "holder.log").read_text()
+    return go
+
+
+def _plant_queue(kind: str, lock_dir: Path, tmp_path: Path) -> Path | None:
+    path = lock_dir / "queue"
+    if kind == "regular file":
+        path.write_text("planted\n")
+    elif kind == "symlink":
+        elsewhere = tmp_path / "elsewhere"
+        elsewhere.mkdir()
+        path.symlink_to(elsewhere)
+    elif kind == "directory of another user":
+        path.mkdir(mode=0o755)
+        os.chown(path, NOBODY, NOBODY)  # no sticky bit: its owner could drop our tickets
+    else:
+        return None
+    return path
+
+
+KINDS = [
+    "healthy",
+    "regular file",
+    "symlink",
+    pytest.param("directory of another user", marks=capabilities.ROOT.mark),
+]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_waiters_are_served_in_arrival_order_even_with_a_planted_queue(
+    kind: str,
+    one_id: dict[str, str],
+    tmp_path: Path,
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    lock_dir = Path(one_id["ROS_ISOLATED_TEST_LOCK_DIR"])
+    planted = _plant_queue(kind, lock_dir, tmp_path)
+    go = _hold(one_id, tmp_path, started)
+    order = tmp_path / "order"
+    waiters = []
+    for index in range(WAITERS):
+        waiter = _start(
+            ["run", "--wait-timeout", "120", "--", "sh", "-c", f"echo {index} >> {order}"],
+            one_id,
+            tmp_path / f"waiter{index}.log",
+            started,
+        )
+        waiters.append(waiter)
+
+        def queued(count: int = index + 1, waiter: subprocess.Popen[bytes] = waiter) -> bool:
+            assert waiter.poll() is None, (tmp_path / f"waiter{count - 1}.log").read_text()
+            return len(_tickets(lock_dir)) == count
+
+        _poll(queued, f"waiter {index} never took a ticket")
+
+    rows = json.loads(run_cli(["status", "--json"], one_id).stdout)
+    queue = [(row["position"], row["pid"]) for row in rows if row["via"] == "queue"]
+    assert queue == [(index + 1, waiter.pid) for index, waiter in enumerate(waiters)]
+    notes = status.queue_notes(lock_dir)
+
+    go.touch()
+    for index, waiter in enumerate(waiters):
+        assert waiter.wait(HUNG) == 0, (tmp_path / f"waiter{index}.log").read_text()
+    assert order.read_text().split() == [str(index) for index in range(WAITERS)]
+
+    logs = [(tmp_path / f"waiter{index}.log").read_text() for index in range(WAITERS)]
+    if planted is None:  # control: a healthy queue says nothing
+        assert notes == []
+        assert not any(NOTE in log for log in logs), logs
+        return
+    assert len(notes) == 1 and str(planted) in notes[0], notes
+    for log in logs:  # once per runner, naming the planted path
+        (line,) = [line for line in log.splitlines() if NOTE in line]
+        assert str(planted) in line and f"queue.uid{os.getuid()}" in line, line
+    if kind == "regular file":
+        assert planted.read_text() == "planted\n"
+    elif kind == "symlink":
+        assert list(planted.resolve().iterdir()) == []  # nothing made through the link
+
+
+def _plant_ticket(lock_dir: Path, name: str, content: bytes) -> int:
+    """A ticket held (flock'ed) by this test process: live, as a planter's would be."""
+    folder = lock_dir / "queue"
+    if not folder.exists():
+        folder.mkdir()
+        folder.chmod(0o1777)
+    fd = os.open(folder / name, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+    os.write(fd, content)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    return fd
+
+
+def _name() -> str:
+    """A ticket name after every waiter's so far: the planted ticket is behind them."""
+    return f"{time.time_ns() + 10**12:020d}-4242.ticket"
+
+
+#: name -> (ticket name, record). Each crashed status or forged a line before the fix.
+HOSTILE_TICKETS: dict[str, tuple[Callable[[], str], bytes]] = {
+    "pid 1e999": (_name, b'{"pid": 1e999, "user": "u", "command": "c", "started": 1}'),
+    "started 1e300": (_name, b'{"pid": 4242, "user": "u", "command": "c", "started": 1e300}'),
+    "started Infinity": (_name, b'{"pid": 4242, "command": "c", "started": Infinity}'),
+    "not an object": (_name, b'"just a string"'),
+    "deeply nested": (_name, b"{" + b'"a": [' * 30_000),
+    "invalid UTF-8": (_name, b'{"pid": 4242, "command": "\xff\xfe", "started": 1}'),
+    "huge": (_name, b'{"pid": 4242, "command": "' + b"x" * 300_000 + b'"}'),
+    "a 200-digit arrival time": (lambda: "9" * 200 + "-4242.ticket", b"{}"),
+    "digits int() refuses": (lambda: "9\u00b2-\u00b2.ticket", b"{}"),
+}
+
+
+@pytest.mark.parametrize("variant", sorted(HOSTILE_TICKETS))
+def test_a_planted_ticket_breaks_neither_status_nor_the_queue(
+    variant: str, one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
+) -> None:
+    lock_dir = Path(one_id["ROS_ISOLATED_TEST_LOCK_DIR"])
+    go = _hold(one_id, tmp_path, started)
+    waiter = _start(
+        ["run", "--wait-timeout", "120", "--", "echo", "waiter-marker"],
+        one_id,
+        tmp_path / "waiter.log",
+        started,
+    )
+    _poll(lambda: len(_tickets(lock_dir)) == 1, "the waiter never took a ticket")
+    name, content = HOSTILE_TICKETS[variant]
+    fd = _plant_ticket(lock_dir, name(), content)
+    try:
+        listed = run_cli(["status", "--json"], one_id)
+        assert listed.returncode == 0, listed.stdout + listed.stderr
+        queue = [row for row in json.loads(listed.stdout) if row["via"] == "queue"]
+        # Control: the real waiter is first, with its real PID and command.
+        assert (queue[0]["position"], queue[0]["pid"]) == (1, waiter.pid), queue
+        assert "echo waiter-marker" in str(queue[0]["command"])
+        assert len(queue) == 2, queue  # the planted one is still a live ticket
+        table = run_cli(["status"], one_id)
+        assert table.returncode == 0, table.stdout + table.stderr
+        assert f" {waiter.pid} " in table.stdout
+    finally:
+        os.close(fd)
+    go.touch()
+    assert waiter.wait(HUNG) == 0, (tmp_path / "waiter.log").read_text()
+    assert "waiter-marker" in (tmp_path / "waiter.log").read_text()
+
+
+def test_a_planted_ticket_command_forges_no_line_in_status(
+    one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
+) -> None:
+    lock_dir = Path(one_id["ROS_ISOLATED_TEST_LOCK_DIR"])
+    go = _hold(one_id, tmp_path, started)
+    forged = f"c\r\n  1   4242  root  2024-01-01T00:00:00  {FORGED}\x1b[2K"
+    record = json.dumps({"pid": 4242, "command": forged, "started": time.time()}).encode()
+    fd = _plant_ticket(lock_dir, _name(), record)
+    try:
+        table = run_cli(["status"], one_id)
+    finally:
+        os.close(fd)
+    assert table.returncode == 0, table.stdout + table.stderr
+    assert "\r" not in table.stdout and "\x1b" not in table.stdout, table.stdout
+    (line,) = [line for line in table.stdout.splitlines() if FORGED in line]
+    assert line.split()[:2] == ["1", "4242"] and "c\\x0d\\x0a" in line, line
+    go.touch()
