@@ -32,7 +32,8 @@ Exit codes:
   128+N    the command was killed by signal N, or the runner got signal N
   1        the test's result file reports failures, or the result file or
            --output-file could not be fully written
-  2        nothing was run: bad arguments or settings, or ROS_DOMAIN_ID was preset
+  2        nothing was run: bad arguments or settings, ROS_DOMAIN_ID was preset,
+           or the --junit-xml or --output-file path cannot be used
   3        nothing was run: no domain ID could be reserved
   124      stopped by --timeout
   126/127  the command could not be executed / was not found
@@ -68,6 +69,16 @@ def _finite(_ctx: click.Context, param: click.Parameter, value: float | None) ->
     return value
 
 
+def _a_path(_ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    """Refuse an option word as a file name: `--junit-xml -- cmd` would write a file `--`.
+
+    Checked as typed (Path would make ./-name -name), so ./-name still names such a file.
+    """
+    if value is not None and value.startswith("-"):
+        raise click.BadParameter(f"needs a path, got {value!r}", param=param)
+    return None if value is None else Path(value)
+
+
 class _RunCommand(click.Command):
     """`run`, whose bad arguments still leave the --junit-xml file that was asked for."""
 
@@ -77,9 +88,9 @@ class _RunCommand(click.Command):
             return super().parse_args(ctx, args)
         except click.UsageError as error:
             # One line (click's own error is three), and the result file when one was asked.
-            message = (
-                f"ros-isolated-test run: {error.format_message()}; see ros-isolated-test run --help"
-            )
+            # session prefixes "ros-isolated-test: error: "; click ends its sentences in ".".
+            said = error.format_message().strip().removesuffix(".")
+            message = f"{said}; see ros-isolated-test run --help"
             ctx.exit(session.report_usage_error(message, _junit_xml_of(raw)))
 
 
@@ -88,10 +99,14 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     for index, item in enumerate(args):
         if item == "--":
             break
+        value = None
         if item.startswith("--junit-xml="):
-            return Path(item.split("=", 1)[1])
-        if item == "--junit-xml" and index + 1 < len(args):
-            return Path(args[index + 1])
+            value = item.split("=", 1)[1]
+        elif item == "--junit-xml" and index + 1 < len(args):
+            value = args[index + 1]
+        if value is not None:
+            # An option word (`--junit-xml -- true`) is no path: nothing is written there.
+            return Path(value) if value and not value.startswith("-") else None
     return None
 
 
@@ -105,12 +120,14 @@ def _junit_xml_of(args: list[str]) -> Path | None:
 )
 @click.option(
     "--junit-xml",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=click.Path(dir_okay=False),
+    callback=_a_path,
     help="Write an xUnit result file here (passed, failed with the output tail, or refused).",
 )
 @click.option(
     "--output-file",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=click.Path(dir_okay=False),
+    callback=_a_path,
     help="Also write all output to this file, as it is produced.",
 )
 @click.option("--package-name", help="Package name for suite and class names in the result.")
@@ -167,8 +184,7 @@ def run(
     try:
         config = settings.read(wait_timeout=wait_timeout, discovery_range=discovery_range)
     except settings.SettingsError as error:
-        message = f"ros-isolated-test run: {error}"
-        sys.exit(session.report_usage_error(message, junit_xml))
+        sys.exit(session.report_usage_error(str(error), junit_xml))
     request = RunRequest(
         command=command,
         mode=Mode.SHELL,

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers.commands import CLI, HUNG, ament, run_cli
+from helpers.commands import CLI, HUNG, ament, run_cli, run_runner
 from helpers.results import load_result
 
 #: A command leaving a file behind, so a test can tell whether it ran.
@@ -211,6 +211,7 @@ def test_run_help_names_every_variable_and_exit_code(env: dict[str, str]) -> Non
         "ROS_ISOLATED_TEST_DISCOVERY_RANGE",
         "DISABLE_ROS_ISOLATION",
         "--output-file could not be fully written",
+        "or the --junit-xml or --output-file path cannot be used",
         "124",
         "126/127",
     ):
@@ -218,3 +219,71 @@ def test_run_help_names_every_variable_and_exit_code(env: dict[str, str]) -> Non
     top = run_cli(["--help"], env)
     for name in ("ROS_ISOLATED_TEST_DOMAINS", "ROS_ISOLATED_TEST_LOCK_DIR"):
         assert name in top.stdout
+
+
+# --- an option word is no path: `--junit-xml -- cmd` names no file `--` ----------------------
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        ["--junit-xml", "--"],
+        ["--junit-xml=--", "--"],
+        ["--output-file", "--"],
+        ["--junit-xml", "--timeout", "5", "--"],
+    ],
+)
+def test_an_option_word_where_a_path_belongs_is_a_usage_error(
+    env: dict[str, str], tmp_path: Path, options: list[str]
+) -> None:
+    before = set(tmp_path.iterdir())
+    proc = run_cli(["run", *options, *TOUCH], env, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Running with ROS_DOMAIN_ID" not in proc.stdout
+    line = _one_error_line(proc.stderr)
+    option = options[0].split("=")[0]
+    assert f"'{option}': needs a path" in line, line
+    assert set(tmp_path.iterdir()) == before  # nothing ran, no file `--` or `--timeout`
+
+
+def test_a_file_whose_name_starts_with_a_dash_is_reached_through_dot_slash(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """Control: a path given as a path still works, and the command runs."""
+    proc = run_cli(["run", "--junit-xml", "./--r.xml", "--", *TOUCH], env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (tmp_path / "ran").exists()
+    assert load_result(tmp_path / "--r.xml").only.outcome == "passed"
+
+
+# --- usage errors read as one clean line -----------------------------------------------------
+
+PREFIX = "ros-isolated-test: error: "
+
+
+@pytest.mark.parametrize(
+    ("mode", "args", "says"),
+    [
+        ("run", ["run"], "Missing argument 'COMMAND...'; see ros-isolated-test run --help"),
+        ("run", ["run", "--timeout", "x", "--", "true"], "'x' is not a valid float range; see"),
+        ("run", ["run", "--junit-xml"], "requires an argument; see ros-isolated-test run --help"),
+        ("run", ["run", "--discovery-range", "FOO", "--", "true"], "is not a discovery range"),
+        ("runner", ["r.xml", "--bogus", "--command", "true"], "unrecognized arguments: --bogus;"),
+        ("runner", ["r.xml"], "no test command: pass it after --command (it must come last);"),
+    ],
+)
+def test_a_usage_error_is_one_line_with_one_prefix_and_no_doubled_punctuation(
+    env: dict[str, str], runner_script: str, tmp_path: Path, mode: str, args: list[str], says: str
+) -> None:
+    if mode == "run":
+        proc = run_cli(args, env, cwd=tmp_path)
+    else:
+        proc = run_runner(runner_script, args, env, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    line = _one_error_line(proc.stderr)
+    assert line.startswith(PREFIX), line
+    said = line.removeprefix(PREFIX)
+    assert says in said, line
+    assert "error:" not in said, line  # one prefix, not "error: ros-isolated-test run: ..."
+    assert not said.startswith(("ros-isolated-test", "run_test_isolated.py")), line
+    assert ".;" not in said and ";;" not in said and ".." not in said.replace("...", ""), line

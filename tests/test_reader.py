@@ -4,12 +4,13 @@ Big: real suites have thousands of cases, so every case is kept up to ``MAX_CASE
 beyond it every failed, errored and skipped case still is, by name; colcon (counts) and
 xunit-viewer (elements) must read the canonical file alike. Hostile: lxml's parser holds
 an attribute, a start tag, a comment or a CDATA section whole before it reports it, so
-each is bounded in the byte stream; the files are read in a child process whose peak
-RSS ``wait4`` reports.
+each is bounded in the byte stream, and the depth of open elements is capped; the files
+are read in a child process whose peak RSS ``wait4`` reports.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import subprocess
@@ -23,7 +24,7 @@ import pytest
 from helpers.commands import BIN, REPO
 from lxml import etree
 
-from ros_isolated_test.xunit import reader, validate
+from ros_isolated_test.xunit import reader, validate, xml_text
 from ros_isolated_test.xunit.result_file import normalise_file
 
 MB = 1000 * 1000
@@ -283,6 +284,14 @@ def _outcome_elements(handle: TextIO) -> None:
     handle.write('<failure message="last"/></testcase>')
 
 
+def _nested_elements(handle: TextIO) -> None:
+    """20 million open elements (60 MB) after a whole case, inside a second one."""
+    handle.write('<testcase classname="C" name="a"><failure message="before">t</failure>')
+    handle.write('</testcase><testcase classname="C" name="deep"><system-out>')
+    for _ in range(20):
+        handle.write("<a>" * 1_000_000)
+
+
 HOSTILE: dict[str, Writer] = {
     "200MB-message-attribute": _message_attribute,
     "200MB-name-attribute": _name_attribute,
@@ -292,6 +301,7 @@ HOSTILE: dict[str, Writer] = {
     "200MB-cdata": _cdata,
     "200MB-of-blanks-in-a-tag": _blanks_in_tag,
     "2M-outcome-elements-in-one-case": _outcome_elements,
+    "20M-nested-elements": _nested_elements,
 }
 
 
@@ -328,6 +338,17 @@ def test_huge_markup_is_read_in_bounded_memory(tmp_path: Path, kind: str) -> Non
         ]
         assert names == ["a", "b", "result file"]
         return
+    if kind == "20M-nested-elements":
+        assert summary["problems"] == [
+            f"elements nest deeper than {reader.MAX_DEPTH} levels: not a result file; "
+            "reading stopped there"
+        ]
+        # The case before is kept whole, the one the nesting is in as cut off.
+        assert [case[:2] for case in cases[:2]] == [["a", "failure"], ["deep", "error"]]
+        assert cases[0][2] == "before"
+        assert cases[1][2].startswith("The result file ends inside this")
+        assert names == ["a", "deep", "result file"]
+        return
     assert summary["problems"] == []
     first = cases[0]
     if kind == "200MB-message-attribute":
@@ -348,6 +369,104 @@ def test_huge_markup_is_read_in_bounded_memory(tmp_path: Path, kind: str) -> Non
             f"{reader.MAX_OUTCOMES} in one test case were not kept"
         ]
     assert names[-1] == "b"
+
+
+# --- character references: illegal ones shown, legal ones passed (most without a check) ------
+
+
+def _references(codes: range | tuple[int, ...], form: str) -> list[tuple[str, int]]:
+    return [(form.format(code), code) for code in codes]
+
+
+def test_every_character_reference_is_shown_exactly_when_xml_forbids_it() -> None:
+    """All code points, decimal and hex, some zero-padded: the fast path skips no bad one.
+
+    In blocks: a test's peak memory is charged to every child pytest forks after it.
+    """
+    padded = (0, 8, 31, 32, 65, 9999, 10000, 49999, 50000, 0xD7FF, 0xD800, 0xFFFE)
+    blocks = itertools.chain(
+        (
+            _references(range(first, min(first + 0x10000, 0x110002)), form)
+            for first in range(0, 0x110002, 0x10000)
+            for form in ("&#{};", "&#x{:x};")
+        ),
+        [_references(padded, "&#000{};") + _references(padded, "&#x00{:X};")],
+    )
+    for refs in blocks:  # one block at a time
+        sanitiser = reader._Sanitiser(reader.ReadResult(Path("refs.xml")))
+        body = "|".join(ref for ref, _code in refs)
+        out = sanitiser.feed(f"<r>{body}</r>".encode(), final=True).decode()
+        shown = out[len("<r>") : -len("</r>")].split("|")
+        expected = [
+            ref if xml_text.legal(code) and code != 0xFFFD else xml_text.shown_code(code)
+            for ref, code in refs
+        ]
+        assert shown == expected
+
+
+# --- nesting: real files nest a handful of levels, a hostile one stops at the cap -------------
+
+SAMPLES = Path(__file__).parent / "data" / "xunit"
+
+
+def _depth(path: Path) -> int:
+    depth = deepest = 0
+    for event, _element in etree.iterparse(str(path), events=("start", "end")):
+        depth += 1 if event == "start" else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
+@pytest.mark.parametrize(
+    "sample",
+    ["pytest-9.2_xunit2.xml", "gtest-1.17.0_env_failure.xml", "ctest-4.4.4_output-junit.xml"],
+)
+def test_real_files_nest_a_handful_of_levels_and_are_read_whole(sample: str) -> None:
+    """Control of the depth cap: testsuites/testsuite/testcase/failure files lose nothing."""
+    path = SAMPLES / sample
+    assert 4 <= _depth(path) <= 5 < reader.MAX_DEPTH // 100
+    read = reader.read(path)
+    assert read.problems == []
+    names = etree.parse(str(path)).xpath("//testcase/@name")
+    assert [case.attrs["name"] for case in read.cases] == names
+    assert all(case.complete for case in read.cases)
+
+
+def _nested(path: Path, depth: int) -> None:
+    """A case ``deep`` whose output nests elements to ``depth`` levels in all, closed."""
+    inner = depth - 4  # testsuites, testsuite, testcase, system-out
+    path.write_text(
+        '<testsuites><testsuite name="s"><testcase classname="C" name="a"/>'
+        f'<testcase classname="C" name="deep"><system-out>{"<a>" * inner}x{"</a>" * inner}'
+        '</system-out></testcase><testcase classname="C" name="after"><failure message="f"/>'
+        "</testcase></testsuite></testsuites>"
+    )
+
+
+def test_elements_nested_to_the_cap_are_read(tmp_path: Path) -> None:
+    source = tmp_path / "deep.xml"
+    _nested(source, reader.MAX_DEPTH)
+    read = reader.read(source)
+    assert read.problems == []
+    assert [case.attrs["name"] for case in read.cases] == ["a", "deep", "after"]
+    assert read.cases[1].system_out == "x"
+    assert read.cases[2].outcomes[0].tag == "failure"
+
+
+def test_one_level_beyond_the_cap_stops_reading_and_keeps_what_came_before(
+    tmp_path: Path,
+) -> None:
+    source = tmp_path / "deep.xml"
+    _nested(source, reader.MAX_DEPTH + 1)
+    read = reader.read(source)
+    assert read.problems == [
+        f"elements nest deeper than {reader.MAX_DEPTH} levels: not a result file; "
+        "reading stopped there"
+    ]
+    assert [(case.attrs["name"], case.complete) for case in read.cases] == [
+        ("a", True),
+        ("deep", False),
+    ]
 
 
 def test_a_cut_attribute_value_is_marked_and_a_short_one_kept_whole(tmp_path: Path) -> None:

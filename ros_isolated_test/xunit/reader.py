@@ -7,8 +7,8 @@ as a stream through a sanitiser into a strict parser whose events build a small 
 model; what cannot be read is described in ``problems`` and whatever came before it is
 kept. Memory is bounded by the caps below, not by the file: markup the parser would hold
 whole (an attribute, a tag, a comment, a CDATA section) is bounded before it gets there,
-texts and names shrink as they add up, and every case is kept up to MAX_CASES, and
-beyond it every case that did not pass.
+and so is the depth of open elements; texts and names shrink as they add up; every case
+is kept up to MAX_CASES, and beyond it every case that did not pass.
 """
 
 from __future__ import annotations
@@ -54,6 +54,10 @@ SHORT_NAME_LIMIT = 64
 #: test suites whose own counts are kept: more only in a hostile file.
 MAX_OUTCOMES = 16
 MAX_SUITES = 10_000
+#: Elements nested deeper than this stop reading. Real producers nest four or five levels
+#: (testsuites, testsuite, testcase, failure); the parser keeps a few words per open
+#: element, so an unbounded depth costs memory in proportion to the file.
+MAX_DEPTH = 1000
 #: The attributes the normaliser reads; the others are not kept.
 _CASE_KEYS = frozenset({"name", "classname", "time", "status", "result"})
 _OUTCOME_KEYS = frozenset({"message", "type"})
@@ -61,7 +65,13 @@ _OUTCOME_KEYS = frozenset({"message", "type"})
 OUTCOME_TAGS = frozenset(
     {"failure", "error", "skipped", "rerunFailure", "rerunError", "flakyFailure", "flakyError"}
 )
-_CHAR_REF = re.compile(r"&#(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));")
+#: A character reference, unless it is one of the many that are legal at a glance (32 to
+#: 49999, 0x20 to 0xCFFF): those pass in C, not through a Python call each.
+_CHAR_REF = re.compile(
+    r"&#(?!0*(?:3[2-9]|[4-9][0-9]|[1-9][0-9]{2,3}|[1-4][0-9]{4});"
+    r"|x0*(?:[2-9a-fA-F][0-9a-fA-F]|[1-9a-cA-C][0-9a-fA-F]{2,3});)"
+    r"(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));"
+)
 _OPEN_CHAR_REF = re.compile(r"&#x?[0-9a-fA-F]{0,10}$")
 #: Markup that declares a DTD or entities: never allowed to reach the parser.
 _DTD_MARKUP = re.compile(r"<!(?=DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)")
@@ -138,6 +148,40 @@ class ReadResult:
         return self.root_tag in ("testsuite", "testsuites")
 
 
+#: Text pieces are gathered up to this many characters (or pieces) before they are cut.
+_GATHER_CHARS = 64 * 1024
+_GATHER_PIECES = 4096
+
+
+class _Gathered:
+    """A :class:`BoundedText` fed in batches.
+
+    The parser reports the text around every entity or character reference as a piece
+    of its own, and each ``BoundedText.add`` copies the kept tail: 30 million ``&amp;``
+    took a minute one by one, seconds in batches.
+    """
+
+    def __init__(self, limit: int) -> None:
+        self.text = BoundedText(limit)
+        self.pieces: list[str] = []
+        self.size = 0
+
+    def add(self, piece: str) -> None:
+        self.pieces.append(piece)
+        self.size += len(piece)
+        if self.size >= _GATHER_CHARS or len(self.pieces) >= _GATHER_PIECES:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self.pieces:
+            self.text.add("".join(self.pieces))
+            self.pieces, self.size = [], 0
+
+    def value(self) -> str:
+        self._flush()
+        return self.text.value()
+
+
 class _Budget:
     """How many characters a text or name may keep, shrinking as they add up."""
 
@@ -150,10 +194,10 @@ class _Budget:
             return TINY_TEXT_LIMIT
         return TEXT_LIMIT if self.used < TEXT_BUDGET else SMALL_TEXT_LIMIT
 
-    def text(self, small: bool = False) -> BoundedText:
-        return BoundedText(self.limit(small))
+    def text(self, small: bool = False) -> _Gathered:
+        return _Gathered(self.limit(small))
 
-    def take(self, text: BoundedText) -> str:
+    def take(self, text: _Gathered) -> str:
         value = text.value()
         self.used += len(value)
         return value
@@ -182,6 +226,10 @@ def _local(tag: str) -> str:
     return tag.rsplit("}", 1)[-1]
 
 
+class _TooDeep(Exception):
+    """Raised from the parser's start event: lxml stops the parser and re-raises it."""
+
+
 class _Builder:
     """Parser target: turns element events into the raw model, with bounded memory."""
 
@@ -195,13 +243,15 @@ class _Builder:
         self.kept_further = 0
         self.counting: str | None = None  # outcome of a case only counted
         self.in_counted_case = False
-        self.text: BoundedText | None = None
+        self.text: _Gathered | None = None
         self.outcome_attrs: dict[str, str] = {}
         self.root_closed = False
         self.dropped_outcomes = 0
         self.dropped_suites = 0
 
     def start(self, tag: str, attrib: object) -> None:
+        if len(self.stack) >= MAX_DEPTH:
+            raise _TooDeep
         name = _local(tag)
         self.stack.append(name)
         if len(self.stack) == 1:
@@ -351,11 +401,14 @@ _PLAIN_ATTRIBUTE = (
     r"[ \t\r\n]{1,64}[^ \t\r\n=/<>\"'&]{1,256}[ \t\r\n]{0,64}=[ \t\r\n]{0,64}"
     r"(?:\"[^\"<]{0,4096}\"|'[^'<]{0,4096}')"
 )
-#: Text and small, complete tags: passed on in one C-speed match, so only the rare
-#: large or unfinished piece of markup costs Python steps.
+#: Text and small, complete tags: passed on in C-speed matches, so only the rare large
+#: or unfinished piece of markup costs Python steps. Each match takes at most _PLAIN_RUN
+#: pieces: ``re`` keeps a backtracking record per piece, 400 bytes, and a megabyte of
+#: ``<a>`` is 333,333 pieces.
+_PLAIN_RUN = 1000
 _PLAIN = re.compile(
     rf"(?:[^<]+|<{_TAG_NAME}(?:{_PLAIN_ATTRIBUTE}){{0,64}}[ \t\r\n]{{0,64}}/?>"
-    rf"|</{_TAG_NAME}[ \t\r\n]{{0,64}}>)*"
+    rf"|</{_TAG_NAME}[ \t\r\n]{{0,64}}>){{0,{_PLAIN_RUN}}}"
 )
 _REFERENCE_TAIL = re.compile(r"^[#0-9A-Za-z]{0,10};")
 _OPEN_REFERENCE = re.compile(r"&[#0-9A-Za-z]{0,10}$")
@@ -449,10 +502,13 @@ class _Markup:
         return len(text)
 
     def _text(self, text: str, pos: int, final: bool, out: list[str]) -> int:
-        plain = _PLAIN.match(text, pos)
-        assert plain is not None
-        out.append(plain.group())
-        start = plain.end()
+        start = -1
+        while pos > start:
+            start = pos
+            plain = _PLAIN.match(text, start)
+            assert plain is not None
+            out.append(plain.group())
+            pos = plain.end()
         if start >= len(text):
             return start
         ahead = text[start : start + 9]
@@ -783,6 +839,12 @@ def _parse(handle: BinaryIO, result: ReadResult) -> None:
                 break
             if final:
                 parser.close()
+        except _TooDeep:
+            result.problems.append(
+                f"elements nest deeper than {MAX_DEPTH} levels: not a result file; "
+                "reading stopped there"
+            )
+            break
         except etree.XMLSyntaxError as error:
             if sanitiser.in_prolog:
                 result.problems.append("not XML (no element found in it)")

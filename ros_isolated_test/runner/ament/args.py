@@ -238,7 +238,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         request = parse(argv)
     except UsageError as error:
-        message = f"{PROG}: {error}; see {PROG} --help"
+        # session prefixes "ros-isolated-test: error: ": no second prefix here.
+        message = f"{error}; see {PROG} --help"
         return session.report_usage_error(message, error.result_file)
     return session.run(request)
 

@@ -2,7 +2,8 @@
 
 Print this file's path with ``ros-isolated-test runner-path`` and pass it as ``RUNNER``
 to ``ament_add_test`` or ``add_launch_test``. It only finds the installed package and
-hands its arguments over; all behaviour lives in ``ros_isolated_test``.
+hands its arguments over; all behaviour lives in ``ros_isolated_test``. When no Python
+can import the package, it still leaves RESULT_FILE saying why, with nothing but ``os``.
 """
 
 import contextlib
@@ -52,15 +53,139 @@ def _import_main() -> "Callable[[], int]":
         interpreter = _interpreter_of_cli()
         if interpreter and not os.environ.get(_REEXEC_MARK):
             os.environ[_REEXEC_MARK] = "1"
-            os.execv(interpreter, [interpreter, "-u", os.path.abspath(__file__), *sys.argv[1:]])
-        sys.stderr.write(
-            f"run_test_isolated.py: error: cannot import ros-isolated-test with {sys.executable}"
-            f" ({error}); install it for that Python (python3 -m pip install ros-isolated-test)"
-            " or point CMake at the Python it is installed for (-DPython3_EXECUTABLE=...)\n"
+            with contextlib.suppress(OSError):
+                os.execv(interpreter, [interpreter, "-u", os.path.abspath(__file__), *sys.argv[1:]])
+        message = (
+            f"cannot import ros-isolated-test with {sys.executable} ({error}); install it for "
+            "that Python (python3 -m pip install ros-isolated-test) or point CMake at the "
+            "Python it is installed for (-DPython3_EXECUTABLE=...)"
         )
+        _write_not_run(sys.argv[1:], message)
+        sys.stderr.write(f"run_test_isolated.py: error: {message}\n")
         sys.exit(2)
     os.environ.pop(_REEXEC_MARK, None)
     return main
+
+
+# --- without the package: a result file from nothing but os ------------------------------------
+
+
+def _write_not_run(argv: "list[str]", message: str) -> None:
+    """Leave RESULT_FILE (ament passes it first) as a canonical file with one error case.
+
+    The package that writes result files could not be imported, yet ctest and colcon must
+    still find a result saying why the test did not run. Nothing is imported for it:
+    whatever made the import fail must not make this fail too. Best effort: a path that
+    cannot be written leaves only the error line.
+    """
+    if not argv or not argv[0] or argv[0].startswith("-"):
+        return
+    path = argv[0]
+    words = argv[: argv.index("--command")] if "--command" in argv else argv
+    command = argv[len(words) + 1 :]
+    package = ""
+    if "--package-name" in words[:-1]:
+        package = words[words.index("--package-name") + 1]
+    test = os.path.basename(path) or "test"
+    for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
+        if test.endswith(suffix) and len(test) > len(suffix):
+            test = test[: -len(suffix)]
+            break
+    suite = f"{package}.{test}" if package else test
+    temporary = f"{path}.{os.getpid()}.tmp"
+    try:
+        os.makedirs(os.path.dirname(path) or os.curdir, exist_ok=True)
+        fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666)
+        try:
+            # A new file's mtime is the time now: no time module needed for the stamp.
+            stamp = _utc_stamp(int(os.fstat(fd).st_mtime))
+            document = _not_run_document(suite, test, command, message, stamp)
+            view = memoryview(document)
+            while view:
+                view = view[os.write(fd, view) :]
+        finally:
+            os.close(fd)
+        os.replace(temporary, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
+
+
+def _not_run_document(
+    suite: str, test: str, command: "list[str]", message: str, stamp: str
+) -> bytes:
+    """What ResultFile writes for a test not run, as far as schemas/junit.xsd asks it."""
+    # Names must not be blank (the schema says so); what is left of an odd one may be.
+    suite, test, message = _xml(suite) or "test", _xml(test) or "test", _xml(message)
+    host = _xml(os.uname().nodename) or "localhost"
+    version = _own_version()
+    counts = 'tests="1" failures="0" errors="1"'
+    lines = [
+        "<?xml version='1.0' encoding='UTF-8'?>",
+        f'<testsuites name="{suite}" {counts} time="0.000">',
+        f'  <testsuite name="{suite}" {counts} skipped="0" time="0.000" timestamp="{stamp}"'
+        f' hostname="{host}">',
+        "    <properties>",
+        f'      <property name="command" value="{_xml(" ".join(command))}"/>',
+        '      <property name="exit" value="not run"/>',
+        *([f'      <property name="runner_version" value="{_xml(version)}"/>'] if version else []),
+        "    </properties>",
+        f'    <testcase classname="{suite}" name="{test}" time="0.000">',
+        f'      <error message="{message}" type="RunnerNotImportable">{message}</error>',
+        "    </testcase>",
+        "  </testsuite>",
+        "</testsuites>",
+        "",
+    ]
+    return "\n".join(lines).encode("utf-8")
+
+
+def _own_version() -> str:
+    """``__version__`` of the package this file belongs to, read from its text, not imported."""
+    package = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    try:
+        with open(os.path.join(package, "__init__.py"), encoding="utf-8") as handle:
+            for line in handle:
+                if line.startswith("__version__ = "):
+                    return line.split("=", 1)[1].strip().strip("\"'")
+    except (OSError, UnicodeError):
+        pass
+    return ""
+
+
+def _xml(text: str) -> str:
+    r"""``text`` fit for an attribute or element: markup escaped, what XML forbids as ``\xNN``.
+
+    Surrogates (undecodable bytes of a path) and control characters are shown, never
+    written, so the document always parses; blanks at the ends would break a name.
+    """
+    shown: list[str] = []
+    for char in text.strip():
+        code = ord(char)
+        if code < 0x20 or 0xD800 <= code <= 0xDFFF or code in (0xFFFE, 0xFFFF):
+            shown.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}")
+        else:
+            shown.append(char)
+    escaped = "".join(shown).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    return escaped.replace('"', "&quot;")
+
+
+def _utc_stamp(seconds: int) -> str:
+    """``YYYY-MM-DDTHH:MM:SS`` (UTC) of a Unix time, from the civil-calendar arithmetic."""
+    days, rest = divmod(seconds, 86400)
+    # Days since 1970-01-01 to a date: 400-year eras of 146097 days, from 0000-03-01.
+    days += 719468
+    era, day_of_era = divmod(days, 146097)
+    year_of_era = (
+        day_of_era - day_of_era // 1460 + day_of_era // 36524 - day_of_era // 146096
+    ) // 365
+    day_of_year = day_of_era - (365 * year_of_era + year_of_era // 4 - year_of_era // 100)
+    month_index = (5 * day_of_year + 2) // 153
+    day = day_of_year - (153 * month_index + 2) // 5 + 1
+    month = month_index + 3 if month_index < 10 else month_index - 9
+    year = year_of_era + era * 400 + (month <= 2)
+    hour, minute, second = rest // 3600, rest // 60 % 60, rest % 60
+    return f"{year:04d}-{month:02d}-{day:02d}T{hour:02d}:{minute:02d}:{second:02d}"
 
 
 def _exit(code: int) -> "NoReturn":
