@@ -226,7 +226,11 @@ def status(as_json: bool) -> None:
     all of them. Runners queued for an ID follow, in the order they get one
     (in --json: rows with "via": "queue", "domain_id": null and their "position").
     """
-    from ros_isolated_test.domain_coordinator.status import held_domains, waiting_runners
+    from ros_isolated_test.domain_coordinator.status import (
+        held_domains,
+        queue_notes,
+        waiting_runners,
+    )
 
     try:
         config = settings.read()
@@ -236,6 +240,9 @@ def status(as_json: bool) -> None:
     lock_dir = config.lock_dir
     held = held_domains(lock_dir, config.pool)
     waiters = waiting_runners(lock_dir)
+    # On stderr: --json stays parseable.
+    for note in queue_notes(lock_dir):
+        click.echo(f"ros-isolated-test status: note: {note}", err=True)
     if as_json:
         rows: list[dict[str, object]] = [
             {

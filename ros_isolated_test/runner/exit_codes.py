@@ -11,7 +11,8 @@ if TYPE_CHECKING:
 PASSED = 0
 #: The test failed: non-zero exit, failures in its result file, or no result file.
 FAILED = 1
-#: Nothing was run: bad arguments, or a preset ROS_DOMAIN_ID was refused.
+#: Nothing was run: bad arguments or settings, a preset ROS_DOMAIN_ID refused, or a result
+#: or output path that cannot be used.
 USAGE = 2
 #: Nothing was run: no domain ID could be reserved (pool exhausted, lock dir unusable).
 NO_DOMAIN = 3
