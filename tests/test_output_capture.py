@@ -11,10 +11,13 @@ for the result file holds the test's bytes only.
 from __future__ import annotations
 
 import io
+import os
 import re
 import subprocess
 import sys
 import textwrap
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -219,3 +222,92 @@ def test_control_the_same_run_with_room_writes_the_whole_output_file(
     assert done.returncode == 0, done.stderr.decode()
     assert kept.read_bytes() == done.stdout
     assert NO_SPACE.encode() not in done.stdout
+
+
+# --- a non-blocking console: wait for room, give up on a reader that never reads -------------
+
+
+def test_a_console_whose_reader_never_reads_is_given_up_and_the_file_gets_everything(
+    tmp_path: Path,
+) -> None:
+    """Bounded: a non-blocking pipe nobody reads must not hold the runner for ever."""
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    chunk = b"y" * 1000 + b"\n"
+    try:
+        with (
+            open(write_end, "wb", buffering=0, closefd=False) as console,
+            open(tmp_path / "out.log", "wb", buffering=0) as log,
+        ):
+            capture = OutputCapture(console, log, console_stall=0.3)
+            for _ in range(200):  # 200 KB: far more than the pipe holds
+                capture.feed(chunk)
+            capture.note("the test exited with code 0")
+        assert capture.console_error is not None
+        assert "took no byte for 0.3 s" in capture.console_error
+        assert f"after {capture.console_bytes} bytes" in capture.console_error
+        held = b""
+        while True:
+            try:
+                held += os.read(read_end, 1 << 16)
+            except BlockingIOError:
+                break
+            os.set_blocking(read_end, False)
+        assert len(held) == capture.console_bytes < 200 * len(chunk)
+        logged = (tmp_path / "out.log").read_bytes()
+        note = f"{PREFIX}the test exited with code 0\n".encode()
+        assert logged == chunk * 200 + note, "the output file lost nothing"
+    finally:
+        os.close(read_end)
+        os.close(write_end)
+
+
+def test_control_a_non_blocking_console_that_is_read_gets_every_byte() -> None:
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    chunk = b"z" * 1000 + b"\n"
+    received = bytearray()
+
+    def drain() -> None:
+        time.sleep(0.2)  # late: the pipe is full by then, and writes would block
+        while data := os.read(read_end, 1 << 16):
+            received.extend(data)
+
+    reader = threading.Thread(target=drain)
+    reader.start()
+    try:
+        with open(write_end, "wb", buffering=0) as console:
+            capture = OutputCapture(console, console_stall=60)
+            for _ in range(200):
+                capture.feed(chunk)
+    finally:
+        reader.join(timeout=120)
+        os.close(read_end)
+    assert capture.console_error is None
+    assert bytes(received) == chunk * 200
+
+
+def test_a_full_console_is_given_up_and_says_why() -> None:
+    with open("/dev/full", "wb", buffering=0) as full:
+        capture = OutputCapture(full)
+        capture.feed(b"first\n")
+        capture.feed(b"second\n")
+    assert capture.console_error is not None
+    assert NO_SPACE in capture.console_error
+    assert capture.tail_bytes() == b"first\nsecond\n"
+
+
+# --- runner lines with bytes that are not UTF-8 ----------------------------------------------
+
+
+def test_runner_lines_show_bytes_that_are_not_utf8_as_escapes() -> None:
+    console = io.BytesIO()
+    capture = OutputCapture(console)
+    capture.note("invoking: echo " + os.fsdecode(b"caf\xe9"))  # as Python carries argv
+    capture.note("a JSON lone surrogate \ud800 and caf\u00e9")
+    assert (
+        console.getvalue()
+        == (
+            f"{PREFIX}invoking: echo caf\\xe9\n{PREFIX}a JSON lone surrogate \\ud800 and café\n"
+        ).encode()
+    )

@@ -10,9 +10,12 @@ Real full file systems: a tmpfs in a private mount namespace, or a file size lim
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -205,3 +208,89 @@ def test_the_stand_in_fits_the_placeholder_whatever_the_names_and_messages(
     assert NOT_WRITTEN in said
     assert "File too large" in said
     assert "cannot write result file" in done.stderr
+
+
+# --- the test leaves directories where its result or our .orig go ---------------------------
+
+OWN = (
+    b'<?xml version="1.0"?>\n<testsuite name="own" tests="1" failures="0">'
+    b'<testcase classname="own" name="its_case"/></testsuite>\n'
+)
+
+
+@pytest.mark.parametrize(
+    "left",
+    ["result dir, .orig dir", "result dir", "result file, .orig dir", "result file, .orig file"],
+)
+def test_directories_left_at_the_result_path_or_orig_still_give_a_result_saying_so(
+    runner_script: str, env: dict[str, str], tmp_path: Path, left: str
+) -> None:
+    result = tmp_path / "pkg" / "t.xml"
+    original = result.with_name("t.xml.orig")
+    own = tmp_path / "own.xml"
+    own.write_bytes(OWN)
+    steps = []
+    if left.startswith("result dir"):
+        steps.append(f"mkdir -p {result}/inside")
+    else:
+        steps.append(f"cp {own} {result}")
+    if left.endswith(".orig dir"):
+        steps.append(f"mkdir -p {original}/inside")
+    elif left.endswith(".orig file"):
+        steps.append(f"echo planted > {original}")
+    script = f"rm -f {result}; " + "; ".join(steps)
+    argv = argv_for("runner", runner_script, result, "sh", "-c", script)
+
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120, check=False)
+
+    assert "Traceback" not in done.stderr, done.stderr
+    root = valid_result(result)
+    props = properties(root)
+    assert props["original_result_file"] == "t.xml.orig"
+    if left.startswith("result dir"):
+        assert done.returncode == 1, done.stdout + done.stderr
+        assert "directory" in only_error(root)
+        assert (original / "inside").is_dir(), "the test's directory was kept as .orig"
+    else:
+        assert done.returncode == 0, done.stdout + done.stderr
+        names = [case.get("name") for case in root.iter("testcase")]
+        assert names == ["its_case"]
+        assert original.read_bytes() == OWN
+
+
+# --- no instant without a file at the result path ---------------------------------------------
+
+_BIG = """
+import sys
+with open(sys.argv[1], "w") as out:
+    out.write('<?xml version="1.0"?>\\n<testsuite name="big" tests="100000">\\n')
+    for index in range(100000):
+        out.write('<testcase classname="c" name="t%d"/>\\n' % index)
+    out.write("</testsuite>\\n")
+"""
+
+
+def test_a_runner_killed_while_adopting_the_tests_file_leaves_a_file_at_the_path(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    """SIGKILL (nothing can be done then) as soon as the original is kept aside."""
+    result = tmp_path / "pkg" / "big.xml"
+    original = result.with_name("big.xml.orig")
+    script = tmp_path / "big.py"
+    script.write_text(_BIG)
+    argv = argv_for("runner", runner_script, result, sys.executable, str(script), str(result))
+    runner = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        while not os.path.lexists(original):
+            assert runner.poll() is None, "the runner ended before it adopted the result"
+            time.sleep(0.001)
+        runner.kill()
+        runner.wait(timeout=120)
+    finally:
+        if runner.poll() is None:
+            runner.kill()
+            runner.wait()
+    assert runner.returncode == -signal.SIGKILL, "it ended before the kill"
+    assert result.is_file(), "the result path was left empty"
+    kept = result.read_bytes()
+    assert kept == original.read_bytes() or b"<testsuites" in kept[:200]

@@ -3,7 +3,10 @@
 Nothing but a bounded tail is kept in memory, so a test printing gigabytes costs the
 runner the same memory as one printing a line, and time stays linear. The output file
 gets every byte or says where it stopped and why (``file_error``): a full disk never
-truncates it silently.
+truncates it silently. The console gets every byte too, even one left non-blocking by
+whoever shares it (a write that would block waits for room), unless it fails or its
+reader stops reading for :data:`CONSOLE_STALL_SECONDS`: then it gets no more, and
+``console_error`` says why (the run goes on: a console never fails a test).
 """
 
 from __future__ import annotations
@@ -12,12 +15,35 @@ import contextlib
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from typing import BinaryIO
 
 PREFIX = "-- ros-isolated-test: "
 #: Bytes of output kept for the result file: enough to see why a test failed.
 DEFAULT_TAIL_BYTES = 64 * 1024
+#: A console that takes no byte for this long (a reader that stopped reading a
+#: non-blocking pipe) is given up on, so it cannot hold the runner for ever.
+CONSOLE_STALL_SECONDS = 60.0
 _NEWLINE = b"\n"
+#: Why a console stopped whose reader stopped reading.
+STALLED = "its reader took no byte"
+
+
+def encoded(text: str) -> bytes:
+    r"""A runner line as UTF-8; bytes that were not (a command argument, a folder) as ``\xNN``.
+
+    Python carries such bytes as lone surrogates (``surrogateescape``), which plain
+    ``encode()`` refuses: a test named with a Latin-1 byte would crash the runner.
+    """
+    try:
+        return text.encode()
+    except UnicodeEncodeError:
+        pass
+    try:
+        raw = text.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:  # a surrogate no byte stands for (a JSON ``\ud800``)
+        return text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace").encode()
 
 
 class _Stopped(Exception):
@@ -29,30 +55,54 @@ class _Stopped(Exception):
         self.written = written
 
 
-def _write_all(stream: BinaryIO, data: bytes) -> None:
+def _write_all(stream: BinaryIO, data: bytes, wait: Callable[[], bool] | None = None) -> None:
     """Every byte of ``data`` or :class:`_Stopped`.
 
     An unbuffered file (the output file is one) may take fewer bytes than given without
     raising, as a file system filling up does: the rest is written again, and the retry
-    raises the error that stopped it (ENOSPC) or takes nothing more.
+    raises the error that stopped it (ENOSPC) or takes nothing more. A write that would
+    block (a non-blocking descriptor) calls ``wait`` for room, and stops when it says none
+    came.
     """
     view = memoryview(data)
     done = 0
     while done < len(view):
         try:
             count = stream.write(view[done:])
+        except BlockingIOError as error:
+            # A buffered writer: it took (buffered) this many of the bytes before blocking.
+            count = error.characters_written
+            if not count:
+                _wait_or_stop(wait, done)
+                continue
         except (OSError, ValueError) as error:
-            reason = getattr(error, "strerror", None) or str(error) or type(error).__name__
-            raise _Stopped(reason, done) from None
+            raise _Stopped(_why(error), done) from None
         if not count:
             # None (would block) or 0: no progress, so no loop that never ends.
-            raise _Stopped("the file took no more bytes", done)
+            _wait_or_stop(wait, done)
+            continue
         done += count
-    try:
-        stream.flush()
-    except (OSError, ValueError) as error:
-        reason = getattr(error, "strerror", None) or str(error) or type(error).__name__
-        raise _Stopped(reason, done) from None
+    while True:
+        try:
+            stream.flush()
+        except BlockingIOError:
+            _wait_or_stop(wait, done)
+        except (OSError, ValueError) as error:
+            raise _Stopped(_why(error), done) from None
+        else:
+            return
+
+
+def _wait_or_stop(wait: Callable[[], bool] | None, done: int) -> None:
+    """Wait for room to write, or :class:`_Stopped` when none comes."""
+    if wait is None:
+        raise _Stopped("the file took no more bytes", done)
+    if not wait():
+        raise _Stopped(STALLED, done)
+
+
+def _why(error: BaseException) -> str:
+    return getattr(error, "strerror", None) or str(error) or type(error).__name__
 
 
 class OutputCapture:
@@ -63,8 +113,14 @@ class OutputCapture:
         console: BinaryIO,
         output_file: BinaryIO | None = None,
         tail_bytes: int = DEFAULT_TAIL_BYTES,
+        console_stall: float = CONSOLE_STALL_SECONDS,
     ) -> None:
-        self._console = console
+        self._console: BinaryIO | None = console
+        self._console_stall = console_stall
+        #: Bytes that reached the console.
+        self.console_bytes = 0
+        #: Why the console stopped being written (full, gone, stalled), if it did.
+        self.console_error: str | None = None
         self._file = output_file
         self._tail_limit = tail_bytes
         self._tail = bytearray()
@@ -95,7 +151,7 @@ class OutputCapture:
         It starts on a line of its own in each stream: after a test whose last output had
         no newline, the stream gets one first (never the tail: the test's bytes stay its own).
         """
-        data = f"{text}\n".encode()
+        data = encoded(f"{text}\n")
         self._to_console(data if self._console_at_line_start else _NEWLINE + data)
         self._to_file(data if self._file_at_line_start else _NEWLINE + data)
 
@@ -104,10 +160,54 @@ class OutputCapture:
         self.line(PREFIX + text)
 
     def _to_console(self, data: bytes) -> None:
+        stream = self._console
+        if stream is None:
+            return
+        try:
+            _write_all(stream, data, self._console_ready)
+        except _Stopped as stopped:
+            self.console_bytes += stopped.written
+            self._console = None
+            self._console_failed(stopped.reason)
+            return
+        self.console_bytes += len(data)
         self._console_at_line_start = data.endswith(_NEWLINE)
-        # A closed console (a reader that went away) must not kill the test's run.
-        with contextlib.suppress(_Stopped):
-            _write_all(self._console, data)
+
+    def _console_ready(self) -> bool:
+        """Wait until the console takes bytes again; False after ``console_stall`` seconds.
+
+        Its descriptor is left non-blocking: the flag belongs to everyone sharing it.
+        """
+        try:
+            fd = self._console.fileno() if self._console is not None else -1
+        except (OSError, ValueError, AttributeError):
+            return False
+        if fd < 0:
+            return False
+        import select
+
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        return bool(poller.poll(self._console_stall * 1000))
+
+    def _console_failed(self, reason: str) -> None:
+        """Stop the console, never the run: the output file and the result file still get it.
+
+        A reader that went away or stopped reading, a full device: the run's outcome
+        is the test's own. Said on stderr, while that works; the session puts it in
+        the result file.
+        """
+        if reason == STALLED:
+            reason = f"{reason} for {self._console_stall:g} s"
+        self.console_error = (
+            f"writing the console failed after {self.console_bytes} bytes: {reason}"
+        )
+        message = f"{self.console_error}; it gets no more output (the result file keeps the tail)"
+        import os
+
+        with contextlib.suppress(OSError):
+            # One system call, unbuffered: nothing left half-written in a buffer for exit.
+            os.write(2, encoded(f"{PREFIX}{message}\n"))
 
     def _to_file(self, data: bytes) -> None:
         stream = self._file

@@ -7,6 +7,7 @@ Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shlex
 import sys
@@ -54,14 +55,21 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     clash = same_file_message(request.output_file, request.result_file)
     if clash is not None:
         return _not_run(result, console, clash, Outcome.ERROR, exit_codes.USAGE)
+    if not result.write_placeholder():
+        # Said on stderr already. Nothing may run: if ctest killed the runner now, no
+        # file would say what happened, and the final write would most likely fail too.
+        return exit_codes.USAGE
+    # After the placeholder: opening a FIFO or a device can fail (or, blocking, hang).
     try:
         output = _open_output(request.output_file)
     except OSError as error:
-        message = (
-            f"cannot open output file {request.output_file}: {error.strerror}; "
-            "choose a writable file path"
+        return _not_run(
+            result,
+            console,
+            _output_message(request.output_file, error),
+            Outcome.ERROR,
+            exit_codes.USAGE,
         )
-        return _not_run(result, console, message, Outcome.ERROR, exit_codes.USAGE)
     with output as handle:
         capture = OutputCapture(console, handle)
         code = _run(request, request.settings, result, capture, console)
@@ -102,11 +110,19 @@ def _keep_standard_descriptors() -> None:
 
 
 def _console() -> BinaryIO:
-    """Where the test's output goes: stdout, or nowhere when stdout was closed at start."""
-    if sys.stdout is not None:
-        return sys.stdout.buffer
-    # Python leaves sys.stdout None for a descriptor closed at start: fd 1 is /dev/null now.
-    return open(1, "wb", buffering=0, closefd=False)  # lives as long as the run
+    """Where the test's output goes: stdout unbuffered, or nowhere when closed at start.
+
+    Every chunk is written and flushed once anyway; a buffer would only keep bytes a
+    failing console refused (a full device), and the interpreter's exit, flushing them
+    again, would fail the run (code 120) although a console never fails it.
+    """
+    if sys.stdout is None:
+        # Python leaves sys.stdout None for a descriptor closed at start: fd 1 is /dev/null.
+        return open(1, "wb", buffering=0, closefd=False)  # lives as long as the run
+    with contextlib.suppress(OSError, ValueError):
+        sys.stdout.flush()  # what was printed before comes first
+    stream: BinaryIO = getattr(sys.stdout.buffer, "raw", sys.stdout.buffer)
+    return stream
 
 
 def _run(
@@ -118,6 +134,7 @@ def _run(
 ) -> int:
     if request.skip_test:
         capture.note("skipping the test (--skip-test)")
+        _streams_noted(result, capture)
         result.write([result.case(Outcome.SKIPPED, "Test skipped by developer (SKIP_TEST)")])
         return exit_codes.PASSED
     try:
@@ -126,13 +143,24 @@ def _run(
         return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     except DiscoveryError as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
-    if not result.write_placeholder():
-        # Said on stderr already. Nothing may run: if ctest killed the runner now, no
-        # file would say what happened, and the final write would most likely fail too.
-        return exit_codes.USAGE
     guard = _Guard()
+    # The handlers stay until the final word is written: a signal after the test ended
+    # (ctest's SIGTERM, a Ctrl-C) is noted in the result, never lets the result be lost.
+    with _interruptible(guard):
+        return _guarded(request, policy, config, result, capture, console, guard)
+
+
+def _guarded(
+    request: RunRequest,
+    policy: environment.Policy,
+    config: settings.Settings,
+    result: ResultFile,
+    capture: OutputCapture,
+    console: BinaryIO,
+    guard: _Guard,
+) -> int:
     try:
-        with _interruptible(guard), _domain(policy, request, config, capture) as domain_id:
+        with _domain(policy, request, config, capture) as domain_id:
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
                 result.properties["ros_domain_id"] = str(domain_id)
@@ -174,10 +202,13 @@ def _run(
         return _not_run(
             result, console, message, Outcome.ERROR, exit_codes.for_signal(interruption.signum)
         )
-    if guard.late is not None:
-        # The test had ended: the run's outcome stands, the signal is only noted.
-        result.properties["signal_after_test"] = exit_codes.signal_name(guard.late)
-    return _conclude(request, result, capture, outcome)
+    guard.result = result
+    guard.note_late()  # one that came while the ID was released
+    code = _conclude(request, result, capture, outcome)
+    if guard.late is not None and "signal_after_test" not in result.written:
+        # It came while the final word was being written: written again, saying so.
+        result.rewrite()
+    return code
 
 
 class Interrupted(Exception):
@@ -193,23 +224,36 @@ class _Guard:
 
     def __init__(self) -> None:
         self.test_started = False
+        #: The run is writing its final word (a "not run" result): signals only noted.
+        self.concluding = False
         self.late: int | None = None
+        #: Where a late signal is noted, once the test has ended.
+        self.result: ResultFile | None = None
+
+    def note_late(self) -> None:
+        """The test had ended: the run's outcome stands, the signal is only noted."""
+        if self.late is not None and self.result is not None:
+            self.result.properties["signal_after_test"] = exit_codes.signal_name(self.late)
 
 
 @contextlib.contextmanager
 def _interruptible(guard: _Guard) -> Iterator[None]:
-    """Until the supervisor takes over, SIGINT/SIGTERM/SIGHUP end the run cleanly.
+    """Until the final result is written, SIGINT/SIGTERM/SIGHUP never end the runner abruptly.
 
-    Needed for a runner queued for an ID (and for PID 1, which has no default action).
-    Once the test has run, a signal (while the ID is released) is only remembered.
-    Outside the main thread (an embedding program) handlers cannot be set: the
-    program's own stay.
+    Before the test starts (a runner queued for an ID; PID 1, which has no default
+    action) a signal ends the run cleanly, with a result saying it never ran. While the
+    test runs, the supervisor's own handlers pass it on. After that (the ID being
+    released, the result file being written) it is only noted. Outside the main thread
+    (an embedding program) handlers cannot be set: the program's own stay.
     """
 
     def stop(signum: int, _frame: FrameType | None) -> None:
-        if guard.test_started:
-            guard.late = signum
+        if guard.test_started or guard.concluding:
+            if guard.late is None:
+                guard.late = signum
+                guard.note_late()
             return
+        guard.concluding = True
         raise Interrupted(signum)
 
     previous = supervisor.set_handlers(stop)
@@ -267,11 +311,10 @@ def _conclude(
     if outcome.signal is not None:
         result.properties["signal"] = exit_codes.signal_name(outcome.signal)
     result.properties["duration"] = f"{outcome.duration:.3f}"
-    if capture.file_error is not None:
-        result.properties["output_file_error"] = capture.file_error
     if outcome.start_error is not None:
         capture.note(f"invocation failed: {outcome.start_error}")
     capture.note(f"the test {reason}")
+    _streams_noted(result, capture)
     if result.path is None:
         return code
     duration = outcome.duration
@@ -338,6 +381,14 @@ def _adopt(
     return exit_codes.code_for(exit_codes.WRITE_OWN, code, reports_failure)
 
 
+def _streams_noted(result: ResultFile, capture: OutputCapture) -> None:
+    """What went wrong with the output file (fails a pass) or the console (never does)."""
+    if capture.file_error is not None:
+        result.properties["output_file_error"] = capture.file_error
+    if capture.console_error is not None:
+        result.properties["console_error"] = capture.console_error
+
+
 def _output_lost_case(result: ResultFile, capture: OutputCapture) -> Case:
     """An error case for a test that passed but whose --output-file lost output (full disk)."""
     message = (
@@ -380,8 +431,33 @@ def _error(console: BinaryIO, message: str) -> None:
 
 
 def _open_output(path: Path | None) -> contextlib.AbstractContextManager[BinaryIO | None]:
+    """The --output-file, opened for writing; a FIFO without a reader fails at once (ENXIO).
+
+    Opened non-blocking, so a FIFO nobody reads is an error rather than a hang; then
+    blocking again (our own descriptor), so a slow reader slows the test, never loses output.
+    """
     if path is None:
         return contextlib.nullcontext()
     path.parent.mkdir(parents=True, exist_ok=True)
+
+    def opener(name: str, flags: int) -> int:
+        fd = os.open(name, flags | os.O_NONBLOCK, 0o666)
+        try:
+            os.set_blocking(fd, True)
+        except BaseException:
+            os.close(fd)
+            raise
+        return fd
+
     # Unbuffered: a failing write is seen (and survived) at once, never at close.
-    return open(path, "wb", buffering=0)
+    return open(path, "wb", buffering=0, opener=opener)
+
+
+def _output_message(path: Path | None, error: OSError) -> str:
+    """The one-line error for an --output-file that cannot be opened."""
+    if error.errno == errno.ENXIO:
+        return (
+            f"cannot open output file {path}: it is a FIFO that nobody reads; "
+            "start its reader first, or choose a regular file path"
+        )
+    return f"cannot open output file {path}: {error.strerror}; choose a writable file path"

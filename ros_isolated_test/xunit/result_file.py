@@ -1,11 +1,13 @@
 """One test's result file through its life: stale file gone, placeholder, final word.
 
 The final word is always a canonical file at the result path: the test's own file
-normalised (the original kept beside it as ``<name>.orig``), or one written for a
-test that wrote none. When the final word cannot be written (a disk that filled up
-while the test ran), the placeholder must not stay behind saying the test most likely
-timed out: it is overwritten in place, in blocks it already holds, by a short result
-saying the write failed and how the test ended. The placeholder keeps room for that.
+normalised (the original kept beside it as ``<name>.orig``, linked there before the
+canonical file replaces it in one rename, so a kill at any instant leaves a file at the
+path), or one written for a test that wrote none. When the final word cannot be written
+(a disk that filled up while the test ran), the placeholder must not stay behind saying
+the test most likely timed out: it is overwritten in place, in blocks it already holds,
+by a short result saying the write failed and how the test ended. The placeholder keeps
+room for that.
 """
 
 from __future__ import annotations
@@ -51,7 +53,11 @@ class ResultFile:
         self.problems: list[str] = []
         #: Why the result file could not be written, if it could not.
         self.write_error: str | None = None
-        # Whether adopt() moved the test's own file aside to ``original``.
+        #: The properties the last final word written holds.
+        self.written: dict[str, str] = {}
+        # That final word (cases, duration, output, checked), to write it again.
+        self._last: tuple[list[Case], float, str, bool] | None = None
+        # Whether adopt() kept the test's own file aside at ``original``.
         self._adopted = False
         # Why the last write failed, in the system's words (No space left on device).
         self._failure = "the write failed"
@@ -70,24 +76,19 @@ class ResultFile:
         for stale in (self.path, self.original):
             assert stale is not None
             with contextlib.suppress(FileNotFoundError):
-                if stale.is_dir() and not stale.is_symlink():
-                    import shutil
-
-                    shutil.rmtree(stale)
-                else:
-                    stale.unlink()
+                _remove(stale)
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
     def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
         """The test as one case, for a test that wrote no result of its own."""
-        case = Case.saying(self.suite_name, self.request.test_name, outcome, message)
+        case = Case.saying(self.suite_name, shown(self.request.test_name), outcome, shown(message))
         case.time = duration
         return case
 
     @property
     def suite_name(self) -> str:
         """``<package>.<test name>``: unique across a build, as CI reports need."""
-        return f"{self.request.package}.{self.request.test_name}"
+        return shown(f"{self.request.package}.{self.request.test_name}")
 
     def _suite(
         self, cases: list[Case], duration: float, properties: dict[str, str], output: str = ""
@@ -98,7 +99,7 @@ class ResultFile:
             time=duration,
             timestamp=validate.timestamp(self.started),
             hostname=validate.hostname(),
-            properties=properties,
+            properties={name: shown(value) for name, value in properties.items()},
             system_out=output,
         )
 
@@ -114,12 +115,30 @@ class ResultFile:
         """
         if self.path is None:
             return None
-        suite = self._suite(cases, duration, dict(self.properties), output)
-        rendered = validate.render(suite, checked)
+        properties = dict(self.properties)
+        rendered = validate.render(self._suite(cases, duration, properties, output), checked)
         if self._write(rendered.data):
+            self.written, self._last = properties, (cases, duration, output, checked)
             return rendered
         self._leave_word(cases, duration)
         return None
+
+    def rewrite(self) -> None:
+        """The last final word again, with the properties added since (a late signal).
+
+        Should this write fail, the file already written stands: it is complete.
+        """
+        if self.path is None or self._last is None:
+            return
+        cases, duration, output, checked = self._last
+        properties = dict(self.properties)
+        suite = self._suite(cases, duration, properties, output)
+        try:
+            write_atomically(self.path, validate.render(suite, checked).data)
+        except OSError as error:
+            _say(f"the result file {self.path} does not note a late signal: {_reason(error)}")
+            return
+        self.written = properties
 
     def write_placeholder(self) -> bool:
         """What ctest leaves behind if it kills the runner: the test did not finish.
@@ -158,16 +177,18 @@ class ResultFile:
     def _leave_word(self, cases: list[Case], duration: float) -> None:
         """After a failed final write: leave a file behind that says what happened.
 
-        The test's own file, if it was moved aside, goes back: its word is the best one
-        left. Else our placeholder, if still there, is overwritten by the stand-in.
+        The test's own file, if kept aside, is still at the path (a directory moved
+        aside goes back): its word is the best one left. Else our placeholder, if still
+        there, is overwritten by the stand-in.
         """
         assert self.path is not None and self.original is not None
-        if self._adopted and not os.path.lexists(self.path):
-            try:
-                os.replace(self.original, self.path)
-            except OSError as error:
-                _say(f"error: cannot put the test's own result file back: {_reason(error)}")
-                return
+        if self._adopted:
+            if not os.path.lexists(self.path):  # a directory, moved aside whole
+                try:
+                    os.replace(self.original, self.path)
+                except OSError as error:
+                    _say(f"error: cannot put the test's own result file back: {_reason(error)}")
+                    return
             _say(f"the test's own result file is left at {self.path}, as the test wrote it")
             return
         if self.placeholder is None:
@@ -263,17 +284,80 @@ class ResultFile:
         return not os.path.lexists(self.path)
 
     def adopt(self) -> list[Case]:
-        """The test's own file as canonical cases; the original is moved aside, not lost."""
+        """The test's own file as canonical cases; the original is kept aside, never lost.
+
+        The original is linked (or copied) to ``original`` and stays at the path until
+        :meth:`write` renames the canonical file over it: whenever the runner is killed,
+        a file is at the path. A directory in its place can only be moved aside whole.
+        """
         assert self.path is not None and self.original is not None
         cases, read = read_cases(self.path, self.request.package, self.request.test_name)
         self.problems = read.problems + read.repairs
         if read.repairs:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)
         if os.path.lexists(self.path):
-            os.replace(self.path, self.original)
-            self._adopted = True
-            self.properties["original_result_file"] = self.original.name
+            try:
+                _keep_aside(self.path, self.original)
+            except OSError as error:
+                problem = f"cannot keep the test's own file as {self.original}: {_reason(error)}"
+                self.problems.append(problem)
+                self.properties["original_result_file_error"] = problem
+            else:
+                self._adopted = True
+                self.properties["original_result_file"] = self.original.name
         return cases
+
+
+def _keep_aside(path: Path, original: Path) -> None:
+    """Put the test's file at ``original`` too, whatever the test left there before.
+
+    ``original`` is ours (``prepare`` cleared it): anything there now the test made,
+    a file or a whole tree, and it gives way.
+    """
+    _remove(original)
+    import stat
+
+    mode = os.lstat(path).st_mode
+    if stat.S_ISDIR(mode):
+        os.rename(path, original)
+        return
+    try:
+        os.link(path, original, follow_symlinks=False)
+    except OSError:
+        # A file system without hard links: a copy (a symlink stays a symlink).
+        import shutil
+
+        shutil.copy2(path, original, follow_symlinks=False)
+
+
+def _remove(path: Path) -> None:
+    """Remove a file, a symlink or a whole directory tree at ``path``, if any."""
+    import stat
+
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(mode):
+        import shutil
+
+        shutil.rmtree(path)  # never follows a symlink inside
+    else:
+        os.unlink(path)
+
+
+def shown(text: str) -> str:
+    r"""``text`` with bytes that were not UTF-8 (carried as lone surrogates) shown as ``\xNN``.
+
+    A command argument, a folder or an --env value may hold any bytes: the result shows
+    them as the output tail does, never as ``\udcNN``.
+    """
+    if text.isascii():
+        return text
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a surrogate no byte stands for: the serialiser shows it
+        return text
 
 
 def _reason(error: OSError) -> str:
