@@ -314,8 +314,13 @@ def run(
     capture: OutputCapture,
     timeout: float | None = None,
     kill_grace: float = 5.0,
+    on_start: Callable[[], None] | None = None,
 ) -> Outcome:
-    """Run ``command`` to its end and its tree's end, streaming its output into ``capture``."""
+    """Run ``command`` to its end and its tree's end, streaming its output into ``capture``.
+
+    ``on_start`` is called once the test exists, while this function's signal handlers
+    are in place: the caller learns the test started with no window for a signal between.
+    """
     reaper.become_subreaper()
     start = time.monotonic()
     others = _others()
@@ -325,6 +330,8 @@ def run(
             test = _Test(command, env)
         except OSError as error:
             return Outcome(returncode=None, duration=time.monotonic() - start, start_error=error)
+        if on_start is not None:
+            on_start()
         try:
             if signals.received is not None:
                 # It came while the test was being started, before it could be passed on.

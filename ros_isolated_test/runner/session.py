@@ -179,9 +179,13 @@ def _guarded(
             for note in policy.notes:
                 capture.note(note)
             capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
-            guard.test_started = True
             outcome = supervisor.run(
-                request.command, env, capture, request.timeout, request.kill_grace
+                request.command,
+                env,
+                capture,
+                request.timeout,
+                request.kill_grace,
+                on_start=guard.start,
             )
             # Named before the ID is released: the block note (_domain) follows.
             for leftover in outcome.leftovers:
@@ -229,6 +233,14 @@ class _Guard:
         self.late: int | None = None
         #: Where a late signal is noted, once the test has ended.
         self.result: ResultFile | None = None
+
+    def start(self) -> None:
+        """Called by the supervisor once the test exists, while its own handlers are in place.
+
+        Not before: a signal until then finds the test not started and ends the run
+        cleanly, saying it never ran, rather than being noted while the test runs in full.
+        """
+        self.test_started = True
 
     def note_late(self) -> None:
         """The test had ended: the run's outcome stands, the signal is only noted."""
