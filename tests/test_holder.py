@@ -9,6 +9,8 @@ all read it, and the queued runner must still get the ID once it is free.
 from __future__ import annotations
 
 import json
+import os
+import pwd
 import signal
 import subprocess
 import time
@@ -206,3 +208,12 @@ def test_display_text_escapes_what_a_terminal_acts_on_and_keeps_the_rest() -> No
     assert holder.display_text("caf\udce9") == "caf\\xe9"  # an undecodable byte
     cut = holder.display_text("x" * 5000, 100)
     assert cut.startswith("x" * 100) and cut.endswith("(4900 more characters)")
+
+
+def test_user_name_is_the_passwd_name_or_the_number_or_unknown() -> None:
+    """One lookup for records, tickets, squatters and survivors, never an exception."""
+    assert holder.user_name(os.getuid()) == pwd.getpwuid(os.getuid()).pw_name
+    with pytest.raises(KeyError):
+        pwd.getpwuid(PLANTER)  # the control: nobody has this UID here
+    assert holder.user_name(PLANTER) == str(PLANTER)
+    assert holder.user_name(None) == "?"  # a process gone before its owner was read

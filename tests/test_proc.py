@@ -16,6 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from helpers import capabilities
 
 from ros_isolated_test.process import proc, tree
 
@@ -23,6 +24,8 @@ from ros_isolated_test.process import proc, tree
 DEADLINE = 60.0
 #: A kernel command name with the characters that break naive parsing: spaces, ( and ).
 AWKWARD_NAME = "a) b (c)) d"
+#: A user ID nobody has here, for a process that is not ours.
+OTHER_UID = 4242
 
 
 def _wait_for(predicate: object, what: str) -> None:
@@ -79,16 +82,16 @@ def test_the_state_follows_stop_continue_and_exit(sleeper: subprocess.Popen[byte
     _wait_for(lambda: state() not in proc.STOPPED_STATES, "the continue")
     stat = proc.read_stat(sleeper.pid)
     assert stat is not None
-    assert proc.is_running(sleeper.pid, stat.start)
+    assert _key(proc.living(sleeper.pid, stat.start)) == stat.key
     os.kill(sleeper.pid, signal.SIGKILL)
     # Not reaped yet: a zombie, which runs no more and so is no survivor.
     _wait_for(lambda: state() == "Z", "the zombie")
     zombie = proc.read_stat(sleeper.pid)
     assert zombie is not None and not zombie.alive
-    assert not proc.is_running(sleeper.pid, stat.start)
+    assert proc.living(sleeper.pid, stat.start) is None
     sleeper.wait(DEADLINE)
     assert proc.read_stat(sleeper.pid) is None
-    assert not proc.is_running(sleeper.pid, stat.start)
+    assert proc.living(sleeper.pid, stat.start) is None
 
 
 def test_a_pid_with_another_start_time_is_another_process(
@@ -97,9 +100,13 @@ def test_a_pid_with_another_start_time_is_another_process(
     """What a recycled PID looks like: same number, later start."""
     stat = proc.read_stat(sleeper.pid)
     assert stat is not None
-    assert proc.is_running(sleeper.pid, stat.start)
-    assert not proc.is_running(sleeper.pid, stat.start - 1)
-    assert not proc.is_running(sleeper.pid, stat.start + 1)
+    assert _key(proc.living(sleeper.pid, stat.start)) == stat.key
+    assert proc.living(sleeper.pid, stat.start - 1) is None
+    assert proc.living(sleeper.pid, stat.start + 1) is None
+
+
+def _key(stat: proc.Stat | None) -> tuple[int, int] | None:
+    return None if stat is None else stat.key
 
 
 def test_environ_cmdline_and_pids(sleeper: subprocess.Popen[bytes], tmp_path: Path) -> None:
@@ -116,6 +123,26 @@ def test_gone_processes_read_as_empty() -> None:
     assert proc.read_stat(child.pid) is None
     assert proc.environ(child.pid) == b""
     assert proc.cmdline(child.pid) == ""
+    assert proc.owner_uid(child.pid) is None
+
+
+@capabilities.ROOT
+def test_the_owner_is_the_user_the_process_runs_as() -> None:
+    """Read from /proc, not assumed to be us: a child running as another user."""
+    # Popen returns once the child has exec'd, so after its change of user.
+    child = subprocess.Popen(["sleep", "600"], user=OTHER_UID)
+    try:
+        assert proc.owner_uid(child.pid) == OTHER_UID
+        assert proc.owner_uid(os.getpid()) == os.getuid()  # the control
+    finally:
+        child.kill()
+        child.wait(DEADLINE)
+
+
+def test_pid_max_is_the_kernels_and_bounds_every_pid() -> None:
+    kernel = int(Path("/proc/sys/kernel/pid_max").read_text())
+    assert proc.pid_max() == min(kernel, proc.PID_MAX_LIMIT)
+    assert 1 < os.getpid() < proc.pid_max()
 
 
 def test_started_at_is_when_the_process_started() -> None:

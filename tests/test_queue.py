@@ -20,6 +20,9 @@ from helpers import capabilities
 from helpers.commands import CLI, HUNG, run_cli
 from helpers.domains import free_ids
 
+from ros_isolated_test.domain_coordinator.queue import Queue
+from ros_isolated_test.process import proc
+
 DEADLINE = 60.0
 NOBODY = 65534
 WAITERS = 5
@@ -239,3 +242,31 @@ def test_a_planted_ticket_command_forges_no_line_in_status(
     (line,) = [line for line in table.stdout.splitlines() if FORGED in line]
     assert line.split()[:2] == ["1", "4242"] and "c\\x0d\\x0a" in line, line
     go.touch()
+
+
+def test_listing_the_queue_reads_pid_max_once_whatever_the_tickets(
+    lock_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each ticket's name is checked against one pid_max, not a fresh /proc read per ticket.
+
+    The PIDs come from the names (the records hold none), so the limit is still applied:
+    a name's PID at or above pid_max shows as 0.
+    """
+    reads: list[int] = []
+
+    def counted() -> int:
+        reads.append(real())
+        return reads[-1]
+
+    real = proc.pid_max
+    monkeypatch.setattr(proc, "pid_max", counted)
+    limit = real()
+    names = [f"{time.time_ns() + step:020d}-{pid}.ticket" for step, pid in enumerate((7, limit, 9))]
+    fds = [_plant_ticket(lock_dir, name, b"{}") for name in names]
+    try:
+        waiters = Queue(lock_dir).waiters()
+    finally:
+        for fd in fds:
+            os.close(fd)
+    assert [waiter.pid for waiter in waiters] == [7, 0, 9]
+    assert len(reads) == 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 import getpass
 import json
 import os
+import pwd
 import signal
 import subprocess
 import time
@@ -12,12 +13,15 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from helpers import capabilities
 from helpers.commands import CLI, HUNG, run_cli
 from helpers.domains import free_ids
 
 from ros_isolated_test.domain_coordinator.queue import Queue
 
 DEADLINE = 60.0
+#: A user ID nobody has here.
+UNNAMED = 4242
 
 
 def _poll(condition: Callable[[], bool], what: str) -> None:
@@ -124,3 +128,17 @@ def test_a_ticket_record_planted_by_nobody_trustworthy_is_read_safely(
         os.symlink("/etc/shadow", path)
         assert queue.waiters() == []  # a link is no live ticket: not locked by anyone
     assert queue.waiters() == []
+
+
+@capabilities.ROOT
+def test_a_squatter_of_a_user_passwd_does_not_name_shows_its_uid(
+    one_id: dict[str, str], started: list[subprocess.Popen[bytes]]
+) -> None:
+    """As a record or a ticket shows its user: the numeric UID (containers), not "?"."""
+    with pytest.raises(KeyError):
+        pwd.getpwuid(UNNAMED)  # the control: nobody has this UID here
+    domain_id = one_id["ROS_ISOLATED_TEST_DOMAINS"]
+    squatter = subprocess.Popen(["sleep", "600"], env={"ROS_DOMAIN_ID": domain_id}, user=UNNAMED)
+    started.append(squatter)
+    (row,) = [row for row in _rows(one_id) if row["pid"] == squatter.pid]
+    assert (row["via"], row["domain_id"], row["user"]) == ("environment", int(domain_id), "4242")

@@ -31,12 +31,12 @@ from helpers.domains import free_ids
 from helpers.results import load_result
 
 from ros_isolated_test.domain_coordinator import holder
-from ros_isolated_test.domain_coordinator.reservation import (
-    DomainCoordinator,
+from ros_isolated_test.domain_coordinator.block import (
     block_marker,
     blocking_survivors,
     write_block,
 )
+from ros_isolated_test.domain_coordinator.reservation import DomainCoordinator
 from ros_isolated_test.domain_coordinator.status import held_domains
 from ros_isolated_test.process import proc, supervisor
 from ros_isolated_test.process.capture import OutputCapture

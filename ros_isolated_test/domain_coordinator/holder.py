@@ -17,13 +17,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
+from ros_isolated_test.process import proc
+from ros_isolated_test.text import shown
 
 #: JSON string escapes: quote, backslash and every control character.
 _JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
     code: f"\\u{code:04x}" for code in range(0x20)
 }
-#: The kernel's ceiling for pid_max (PID_MAX_LIMIT on 64-bit), when /proc does not say.
-PID_MAX_LIMIT = 1 << 22
 #: Latest time a record may carry: the end of year 9999, which every strftime can show.
 LATEST_TIME = 253402300799.0
 #: Longest text shown for a record's command (user and host: :data:`SHORT_TEXT`).
@@ -102,39 +102,31 @@ def display_text(text: str, limit: int = LONG_TEXT) -> str:
 
     A control character (``\r``, ``\n``, ``\x1b``...) from a planted record could forge
     a line of ``status`` or drive a terminal; it is shown as ``\xNN`` (``\uNNNN``
-    beyond), a byte that was not UTF-8 (a lone surrogate) as ``\xNN`` of that byte.
+    beyond), a byte that was not UTF-8 (a lone surrogate) as :func:`shown` shows it.
     Longer texts keep their first ``limit`` characters and say how many were cut.
     """
     if len(text) > limit:
         text = f"{text[:limit]}... ({len(text) - limit} more characters)"
     if text.isprintable():
         return text
-    return "".join(char if char.isprintable() else _escape(char) for char in text)
+    return "".join(char if char.isprintable() else _escape(char) for char in shown(text))
 
 
 def _escape(char: str) -> str:
     code = ord(char)
-    if 0xDC80 <= code <= 0xDCFF:  # surrogateescape's stand-in for an undecodable byte
-        code -= 0xDC00
     if code <= 0xFF:
         return f"\\x{code:02x}"
     return f"\\u{code:04x}" if code <= 0xFFFF else f"\\U{code:08x}"
 
 
-def pid_max() -> int:
-    """The kernel's pid_max: every real PID is below it."""
-    try:
-        with open("/proc/sys/kernel/pid_max", "rb") as file:
-            return min(int(file.read(32)), PID_MAX_LIMIT)
-    except (OSError, ValueError):
-        return PID_MAX_LIMIT
+def record_pid(value: object, limit: int) -> int | None:
+    """A record's PID when it could be a real one (an int from 1 to below ``limit``).
 
-
-def record_pid(value: object, limit: int | None = None) -> int | None:
-    """A record's PID when it could be a real one (an int from 1 to below pid_max)."""
+    ``limit`` is :func:`proc.pid_max`, read once by the caller for all its records.
+    """
     if type(value) is not int:  # not a bool, not a float such as 1e400
         return None
-    return value if 0 < value < (pid_max() if limit is None else limit) else None
+    return value if 0 < value < limit else None
 
 
 def record_time(value: object) -> float | None:
@@ -161,11 +153,16 @@ def parse_record(text: str) -> dict[str, object] | None:
     return data if isinstance(data, dict) else None
 
 
-def current_user() -> str:
-    """The user name, or the numeric UID where the passwd database lacks it (containers)."""
-    uid = os.getuid()
+def user_name(uid: int | None) -> str:
+    """The name of user ``uid``, display-safe: the one lookup records and ``status`` use.
+
+    The numeric UID where the passwd database lacks it (containers), "?" for None (a
+    process gone before its owner was read).
+    """
+    if uid is None:
+        return "?"
     try:
-        return pwd.getpwuid(uid).pw_name
+        return display_text(pwd.getpwuid(uid).pw_name, SHORT_TEXT)
     except KeyError:
         return str(uid)
 
@@ -181,7 +178,7 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
     holder = Holder(
         domain_id=domain_id,
         pid=os.getpid(),
-        user=current_user(),
+        user=user_name(os.getuid()),
         command=shlex.join(command),
         started=time.time(),
         host=os.uname().nodename,
@@ -202,7 +199,7 @@ def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:
     and text fields, as :func:`write_record` writes it. Anything else was planted.
     """
     holders: list[Holder] = []
-    limit = pid_max()
+    limit = proc.pid_max()
     for path in lock_dir.glob(f"domain-{domain_id}.uid*.holder.json"):
         try:
             data = parse_record(read_small_file(path))

@@ -36,13 +36,14 @@ from ros_isolated_test.domain_coordinator.holder import (
     json_string,
     owned_file,
     parse_record,
-    pid_max,
     read_small_file,
     record_pid,
     record_text,
     record_time,
+    user_name,
 )
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError, ensure_lock_dir
+from ros_isolated_test.process import proc
 
 QUEUE_DIR = "queue"
 _TICKET = ".ticket"
@@ -98,12 +99,10 @@ class Waiter:
 
 def _record(command: Sequence[str] | None) -> bytes:
     """The ticket record of this waiter, as JSON (no ``json`` import: a runner writes it)."""
-    from ros_isolated_test.domain_coordinator.holder import current_user
-
     words = list(command) if command is not None else list(sys.argv)
     fields = (
         f'"pid": {os.getpid()}',
-        f'"user": {json_string(current_user())}',
+        f'"user": {json_string(user_name(os.getuid()))}',
         f'"command": {json_string(shlex.join(words))}',
         f'"started": {time.time()!r}',
         f'"host": {json_string(os.uname().nodename)}',
@@ -111,21 +110,15 @@ def _record(command: Sequence[str] | None) -> bytes:
     return ("{" + ", ".join(fields) + "}").encode("utf-8")
 
 
-def _user_of(uid: int) -> str:
-    import pwd
+def _from_name(name: str, limit: int) -> tuple[int, float]:
+    """The PID (below ``limit``, pid_max) and arrival time a ticket's name holds.
 
-    try:
-        return display_text(pwd.getpwuid(uid).pw_name, SHORT_TEXT)
-    except KeyError:
-        return str(uid)
-
-
-def _from_name(name: str) -> tuple[int, float]:
-    """The PID and arrival time a ticket's name holds (0 for what it does not hold)."""
+    0 for what it does not hold.
+    """
     arrived, _dash, pid_text = name[: -len(_TICKET)].partition("-")
     pid = 0
     if pid_text.isascii() and pid_text.isdigit():  # int() refuses some other digits
-        pid = record_pid(int(pid_text)) or 0
+        pid = record_pid(int(pid_text), limit) or 0
     since = 0.0
     if arrived.isascii() and arrived.isdigit():
         nanoseconds = int(arrived)
@@ -208,12 +201,12 @@ class Queue:
         the arrival time.
         """
         found: list[Waiter] = []
-        limit = pid_max()
+        limit = proc.pid_max()
         for position, path in enumerate(self.live_tickets(), start=1):
-            pid, since = _from_name(path.name)
+            pid, since = _from_name(path.name, limit)
             command, host = "(no record)", ""
             try:
-                owner = _user_of(os.lstat(path).st_uid)
+                owner = user_name(os.lstat(path).st_uid)
             except OSError:
                 continue  # gone meanwhile: it got its ID
             try:

@@ -9,7 +9,8 @@ lock file was planted by another user (a symlink, a file we may not open) a runn
 falls back to a lock file of its own for that ID and still cannot collide.
 
 The lock is filelock's (see ``flock``): a filelock ``FileLock`` on an ID's lock file
-and our reservation of that ID exclude each other.
+and our reservation of that ID exclude each other. An ID whose last test left
+survivors stays taken while they live (see ``block``).
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
-from ros_isolated_test.atomic_file import write_atomically
 from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator.block import blocking_survivors, write_block
 from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
 from ros_isolated_test.domain_coordinator.lock_dir import (
     LockDirError,
@@ -64,107 +65,6 @@ def own_lock_path(lock_dir: Path, domain_id: int) -> Path:
 def release_stamp(lock_dir: Path, domain_id: int) -> Path:
     """A file whose mtime says when this user last released the ID (least recently used)."""
     return lock_dir / f"domain-{domain_id}.uid{os.getuid()}.released"
-
-
-def block_marker(lock_dir: Path, domain_id: int) -> Path:
-    """A file whose presence says "look for block records": one lstat per candidate ID.
-
-    Created by whichever user blocks the ID first; records are per user (see
-    :func:`write_block`), since no user writes a file another user owns.
-    """
-    return lock_dir / f"domain-{domain_id}.blocked"
-
-
-#: First line of a block record: what the file is, and its format's version.
-_BLOCK_HEADER = "ros-isolated-test survivors 1"
-
-
-def write_block(lock_dir: Path, domain_id: int, processes: Iterable[proc.Stat]) -> Path:
-    """Record survivors of the ID's last test, so no runner takes the ID while they live.
-
-    Each process is named by PID and start time (a recycled PID is another process),
-    with this boot's ID and our PID namespace (another boot's or namespace's PIDs name
-    other processes). The marker comes first: a record no one looks for blocks nothing.
-    Raises OSError when the block cannot be recorded.
-    """
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
-    with contextlib.suppress(FileExistsError):  # whoever made it, it says the same
-        os.close(os.open(block_marker(lock_dir, domain_id), flags, 0o644))
-    lines = [_BLOCK_HEADER, f"boot {proc.boot_id()}", f"pidns {proc.pid_namespace()}"]
-    lines += [f"{process.pid} {process.start}" for process in processes]
-    # A name of our own, never guessed by someone planting files: nothing is overwritten.
-    token = f"{os.getpid()}-{os.urandom(4).hex()}"
-    path = lock_dir / f"domain-{domain_id}.uid{os.getuid()}.{token}.blocked"
-    write_atomically(path, ("\n".join(lines) + "\n").encode("utf-8"))
-    return path
-
-
-def blocking_survivors(lock_dir: Path, domain_id: int, clean: bool = False) -> list[proc.Stat]:
-    """The live processes that block the ID (named by a block record), usually none.
-
-    One lstat when the ID is not blocked. Records whose processes are all gone count for
-    nothing; with ``clean`` (the caller holds the ID, so no block is being written) our
-    own such records are removed, then the marker when it is ours and no record is left.
-    """
-    marker = block_marker(lock_dir, domain_id)
-    try:
-        os.lstat(marker)
-    except OSError:
-        return []
-    alive: list[proc.Stat] = []
-    records_left = False
-    for path in _block_records(lock_dir, domain_id):
-        named = _read_block(path)
-        if named is None:  # unreadable, or another namespace's: not ours to judge
-            records_left = True
-            continue
-        found = [
-            stat
-            for pid, start in named
-            if (stat := proc.read_stat(pid)) is not None and stat.start == start and stat.alive
-        ]
-        alive += found
-        if found or not clean or not holder.owned_file(path):
-            records_left = True
-        else:
-            holder.remove_record(path)
-    if clean and not records_left and holder.owned_file(marker):
-        with contextlib.suppress(OSError):
-            marker.unlink()
-    return alive
-
-
-def _block_records(lock_dir: Path, domain_id: int) -> list[Path]:
-    prefix = f"domain-{domain_id}.uid"
-    paths: list[Path] = []
-    with contextlib.suppress(OSError):
-        for entry in os.scandir(lock_dir):
-            if entry.name.startswith(prefix) and entry.name.endswith(".blocked"):
-                paths.append(Path(entry.path))
-    return paths
-
-
-def _read_block(path: Path) -> list[tuple[int, int]] | None:
-    """The (pid, start) pairs a record names; None when it cannot be judged here.
-
-    A record of another boot names nobody (all its processes are gone).
-    """
-    try:
-        lines = holder.read_small_file(path).splitlines()
-    except (OSError, ValueError):
-        return None
-    if len(lines) < 3 or lines[0] != _BLOCK_HEADER:
-        return None
-    if lines[1] != f"boot {proc.boot_id()}":
-        return []
-    if lines[2] != f"pidns {proc.pid_namespace()}":
-        return None
-    named: list[tuple[int, int]] = []
-    for line in lines[3:]:
-        with contextlib.suppress(ValueError):
-            pid, start = line.split()
-            named.append((int(pid), int(start)))
-    return named
 
 
 TYPE_CHECKING = False  # no typing import on a test's path

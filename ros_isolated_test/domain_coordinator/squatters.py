@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import contextlib
 import os
-import pwd
 import re
 import time
 
+from ros_isolated_test.domain_coordinator.holder import user_name
 from ros_isolated_test.process import proc
 
 _VARIABLE = b"ROS_DOMAIN_ID="
@@ -22,7 +22,7 @@ _LEADING_NUMBER = r"\s*(0[xX][0-9a-fA-F]+|[0-9]+)"
 
 
 class Squatter:
-    """A live process with ROS_DOMAIN_ID in its environment."""
+    """A live process with ROS_DOMAIN_ID in its environment (``user`` display-safe)."""
 
     __slots__ = ("command", "domain_id", "pid", "started", "user")
 
@@ -97,9 +97,8 @@ def scan(domains: set[int] | None = None) -> dict[int, list[Squatter]]:
 
 
 def _describe(pid: str, domain: int, boot: float) -> Squatter:
-    user, started = "?", 0.0
-    with contextlib.suppress(OSError, KeyError):
-        user = pwd.getpwuid(os.stat(f"/proc/{pid}").st_uid).pw_name
+    started = 0.0
+    user = user_name(proc.owner_uid(pid))
     command = proc.cmdline(pid) or "?"
     stat = proc.read_stat(pid)
     if stat is not None:

@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import pwd
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, port_guard, queue, squatters
-from ros_isolated_test.domain_coordinator.reservation import blocking_survivors, probe_lock
+from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator.block import blocking_survivors
+from ros_isolated_test.domain_coordinator.reservation import probe_lock
 from ros_isolated_test.process import proc
 
 _LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
@@ -70,7 +70,7 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                     holder.Holder(
                         domain_id=domain_id,
                         pid=squatter.pid,
-                        user=holder.display_text(squatter.user, holder.SHORT_TEXT),
+                        user=squatter.user,
                         command=holder.display_text(squatter.command),
                         started=squatter.started,
                         host="",
@@ -84,32 +84,14 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
 
 def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
     """A survivor of the ID's last test, described like a holder."""
-    user = "?"
-    with contextlib.suppress(OSError, KeyError):
-        user = pwd.getpwuid(os.stat(f"/proc/{survivor.pid}").st_uid).pw_name
     return holder.Holder(
         domain_id=domain_id,
         pid=survivor.pid,
-        user=holder.display_text(user, holder.SHORT_TEXT),
+        user=holder.user_name(proc.owner_uid(survivor.pid)),
         command=holder.display_text(proc.cmdline(survivor.pid) or f"({survivor.name})"),
         started=proc.started_at(survivor),
         host="",
     )
-
-
-def waiting_runners(lock_dir: Path) -> list[queue.Waiter]:
-    """Runners queued for an ID (first come, first served), the next to get one first."""
-    return queue.Queue(lock_dir).waiters()
-
-
-def queue_notes(lock_dir: Path) -> list[str]:
-    """What is wrong with the queue, one line each (none when it is healthy).
-
-    A planted shared queue folder sends runners to per-user folders: still first come,
-    first served, but ``status`` says so, since whoever planted it should be found.
-    """
-    problem = queue.Queue(lock_dir).shared_problem()
-    return [problem] if problem else []
 
 
 def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> str:

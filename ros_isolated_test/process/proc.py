@@ -15,6 +15,8 @@ import os
 GONE_STATES = frozenset("ZXx")
 #: ``state`` letters of a stopped process (SIGSTOP, a tracer): it cannot fork.
 STOPPED_STATES = frozenset("Tt")
+#: The kernel's ceiling for pid_max (PID_MAX_LIMIT on 64-bit), when /proc does not say.
+PID_MAX_LIMIT = 1 << 22
 
 
 class Stat:
@@ -86,10 +88,29 @@ def read_stat(pid: int | str) -> Stat | None:
     return parse_stat(int(pid), data) if data else None
 
 
-def is_running(pid: int, start: int) -> bool:
-    """Whether the process ``pid`` that started at ``start`` still runs (not a zombie)."""
+def living(pid: int, start: int) -> Stat | None:
+    """The process ``pid`` that started at ``start``, while it still runs (not a zombie).
+
+    None when it is gone, a zombie, or its PID now names a later process.
+    """
     found = read_stat(pid)
-    return found is not None and found.start == start and found.alive
+    return found if found is not None and found.start == start and found.alive else None
+
+
+def owner_uid(pid: int | str) -> int | None:
+    """The user ID the process runs as (its /proc directory's owner); None when gone."""
+    try:
+        return os.stat(f"/proc/{pid}").st_uid
+    except OSError:
+        return None
+
+
+def pid_max() -> int:
+    """The kernel's pid_max: every real PID is below it."""
+    try:
+        return min(int(_read("/proc/sys/kernel/pid_max", 32, once=True)), PID_MAX_LIMIT)
+    except ValueError:  # unreadable (empty) or not a number
+        return PID_MAX_LIMIT
 
 
 def pids() -> list[str]:

@@ -12,49 +12,44 @@ from collections.abc import Container
 
 from ros_isolated_test.process import proc
 
-#: A process of the tree: its stat line (pid, ppid, pgid, state, name, start time).
-Process = proc.Stat
 
-
-def processes() -> list[Process]:
+def processes() -> list[proc.Stat]:
     """Every process we can see."""
-    found: list[Process] = []
+    found: list[proc.Stat] = []
     for pid in proc.pids():
         if (process := proc.read_stat(pid)) is not None:
             found.append(process)
     return found
 
 
-def descendants(
-    pid: int, living_only: bool = True, skip: Container[tuple[int, int]] = ()
-) -> list[Process]:
-    """Every descendant of ``pid``, parents before children; zombies left out by default.
+def descendants(pid: int, skip: Container[tuple[int, int]] = ()) -> list[proc.Stat]:
+    """Every living descendant of ``pid``, parents before children (zombies left out).
 
     Processes whose :attr:`~proc.Stat.key` is in ``skip`` are left out with their own
     descendants (what a program embedding the runner started before the test).
     """
-    children: dict[int, list[Process]] = {}
+    children: dict[int, list[proc.Stat]] = {}
     for process in processes():
         if process.key not in skip:
             children.setdefault(process.ppid, []).append(process)
-    found: list[Process] = []
+    found: list[proc.Stat] = []
     queue = list(children.get(pid, ()))
     index = 0
     while index < len(queue):  # breadth first: parents before children
         current = queue[index]
         index += 1
-        if not living_only or current.alive:
+        if current.alive:
             found.append(current)
         queue.extend(children.get(current.pid, ()))
     return found
 
 
-def signal_all(targets: list[Process], signum: int) -> list[Process]:
+def signal_all(targets: list[proc.Stat], signum: int) -> list[proc.Stat]:
     """Send ``signum`` to each target; the ones we may not signal (EPERM) are returned.
 
     Processes already gone are skipped.
     """
-    refused: list[Process] = []
+    refused: list[proc.Stat] = []
     for target in targets:
         try:
             os.kill(target.pid, signum)
