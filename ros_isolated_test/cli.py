@@ -69,12 +69,18 @@ def _finite(_ctx: click.Context, param: click.Parameter, value: float | None) ->
     return value
 
 
-def _a_path(_ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
-    """Refuse an option word as a file name: `--junit-xml -- cmd` would write a file `--`.
+def _is_path(value: str) -> bool:
+    """Whether an option's value can name a file: an option word cannot.
 
-    Checked as typed (Path would make ./-name -name), so ./-name still names such a file.
+    `--junit-xml -- cmd` would otherwise write a file `--`. Checked as typed (Path would
+    make ./-name -name), so ./-name still names such a file.
     """
-    if value is not None and value.startswith("-"):
+    return bool(value) and not value.startswith("-")
+
+
+def _a_path(_ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    """Refuse an option word as a file name (:func:`_is_path`)."""
+    if value is not None and not _is_path(value):
         raise click.BadParameter(f"needs a path, got {value!r}", param=param)
     return None if value is None else Path(value)
 
@@ -106,7 +112,7 @@ def _junit_xml_of(args: list[str]) -> Path | None:
             value = args[index + 1]
         if value is not None:
             # An option word (`--junit-xml -- true`) is no path: nothing is written there.
-            return Path(value) if value and not value.startswith("-") else None
+            return Path(value) if _is_path(value) else None
     return None
 
 
@@ -226,11 +232,8 @@ def status(as_json: bool) -> None:
     all of them. Runners queued for an ID follow, in the order they get one
     (in --json: rows with "via": "queue", "domain_id": null and their "position").
     """
-    from ros_isolated_test.domain_coordinator.status import (
-        held_domains,
-        queue_notes,
-        waiting_runners,
-    )
+    from ros_isolated_test.domain_coordinator.queue import Queue
+    from ros_isolated_test.domain_coordinator.status import held_domains
 
     try:
         config = settings.read()
@@ -239,10 +242,13 @@ def status(as_json: bool) -> None:
         sys.exit(2)
     lock_dir = config.lock_dir
     held = held_domains(lock_dir, config.pool)
-    waiters = waiting_runners(lock_dir)
-    # On stderr: --json stays parseable.
-    for note in queue_notes(lock_dir):
-        click.echo(f"ros-isolated-test status: note: {note}", err=True)
+    queue = Queue(lock_dir)
+    waiters = queue.waiters()
+    # A planted shared queue folder: runners still queue (per user), but whoever planted
+    # it should be found. On stderr: --json stays parseable.
+    problem = queue.shared_problem()
+    if problem is not None:
+        click.echo(f"ros-isolated-test status: note: {problem}", err=True)
     if as_json:
         rows: list[dict[str, object]] = [
             {

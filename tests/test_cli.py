@@ -231,6 +231,9 @@ def test_run_help_names_every_variable_and_exit_code(env: dict[str, str]) -> Non
         ["--junit-xml=--", "--"],
         ["--output-file", "--"],
         ["--junit-xml", "--timeout", "5", "--"],
+        # Empty names no file either, for --junit-xml as for a usage error's result file.
+        ["--junit-xml", "", "--"],
+        ["--output-file=", "--"],
     ],
 )
 def test_an_option_word_where_a_path_belongs_is_a_usage_error(

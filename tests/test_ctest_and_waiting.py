@@ -38,7 +38,7 @@ from helpers.workspace import CrosstalkBuilds, crosstalk_workspace
 
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, POOL_ENV, port_guard, squatters
 from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
-from ros_isolated_test.runner.request import WAIT_TIMEOUT_ENV
+from ros_isolated_test.runner.settings import WAIT_TIMEOUT_ENV
 
 if TYPE_CHECKING:  # annotations only; the module is loaded by path below
     pass

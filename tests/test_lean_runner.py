@@ -1,9 +1,9 @@
 """What keeps a test's runner cheap, checked by what it loads and does, never by a clock.
 
 Every ctest test pays the RUNNER's start-up (benches/ measures it). The heavy modules
-(lxml, filelock, subprocess, dataclasses, typing, json, argparse, tempfile, socket)
-stay unloaded on the common path; they load only where they are needed: lxml when the
-test wrote its own result file, filelock when a runner has to queue for an ID. Also
+(HEAVY: lxml, filelock, subprocess, json, locale, ...) stay unloaded on the common
+path; they load only where they are needed: lxml when the test wrote its own result
+file, filelock when a runner has to queue for an ID, locale to show a failure. Also
 here: the test is started as ``subprocess`` would start it (its PATH, default SIGPIPE,
 no inherited descriptors), and a ``filelock`` lock and our reservation exclude each other.
 """
@@ -43,6 +43,8 @@ HEAVY = (
     "threading",
     "inspect",
     "click",
+    # Only to decode the output tail, which a passing test's result never shows.
+    "locale",
 )
 
 

@@ -162,13 +162,15 @@ _LIMITED = textwrap.dedent(
     """
     import resource, signal, sys
     from pathlib import Path
+    from ros_isolated_test.runner import settings
     from ros_isolated_test.runner.request import Mode, RunRequest
     from ros_isolated_test.xunit.model import Outcome
     from ros_isolated_test.xunit.result_file import ResultFile
 
     path, long = Path(sys.argv[1]), int(sys.argv[2])
     name = "n" * long
-    request = RunRequest(("x" * long, "&<>" * long), Mode.AMENT, result_file=path)
+    command = ("x" * long, "&<>" * long)
+    request = RunRequest(command, Mode.AMENT, settings.defaults(), result_file=path)
     result = ResultFile(request)
     result.prepare()
     result.write_placeholder()

@@ -2,10 +2,11 @@
 
 ctest runs the script with the Python CMake found. When neither that one nor the one of
 the ``ros-isolated-test`` command on PATH can import the package, nothing of the package
-can write the result file, so the script writes it itself with nothing but ``os``: one
-error case saying why and how to fix it, valid against schemas/junit.xsd, beside the
-one-line error and exit code 2. Run for real with the system python3.11, which has not
-got the package, from an environment without the venv.
+can write the result file, so the script writes it itself, importing nothing: one
+error case saying why and how to fix it, valid against schemas/junit.xsd, stamped in
+local time, beside the one-line error and exit code 2. Run for real with the system
+python3.11, which has not got the package, from an environment without the venv.
+Last, the script's arguments: only what the user can fix is called a usage error.
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ from helpers.canonical import check_canonical
 from helpers.commands import REPO, ament
 from lxml import etree
 
+from ros_isolated_test.runner import settings
+from ros_isolated_test.runner.ament import args
+
 SCHEMA = REPO / "ros_isolated_test" / "schemas" / "junit.xsd"
 
 
@@ -33,15 +37,22 @@ def _bare_python() -> str:
 
 
 def _bare_run(
-    python: str, runner_script: str, args: list[str], path: Path, lock_dir: Path, cwd: Path
+    python: str,
+    runner_script: str,
+    args: list[str],
+    path: Path,
+    lock_dir: Path,
+    cwd: Path,
+    *settings: str,
 ) -> subprocess.CompletedProcess[str]:
-    """The script as ctest runs it, with ``python`` and only ``path`` on PATH."""
+    """The script as ctest runs it, with ``python``, only ``path`` on PATH and ``settings``."""
     return subprocess.run(
         [
             "/usr/bin/env",
             "-i",
             f"PATH={path}",
             f"ROS_ISOLATED_TEST_LOCK_DIR={lock_dir}",
+            *settings,
             python,
             "-u",
             runner_script,
@@ -225,17 +236,61 @@ def test_the_document_is_valid_whatever_the_names_hold(
     assert root.findall("testsuite/properties/property")[0].get("value") == "echo <&> \\udcff"
 
 
-@pytest.mark.parametrize(
-    "when",
-    [
-        0,
-        951782400,  # 2000-02-29, a leap day of a year divisible by 400
-        4107542399,  # 2100-02-28 23:59:59: 2100 is no leap year
-        4107542400,
-        1_790_000_000,
-        253402300799,  # 9999-12-31 23:59:59
-    ],
-)
-def test_the_stamp_is_the_utc_calendar_time(runner_script: str, when: int) -> None:
-    expected = datetime.datetime.fromtimestamp(when, datetime.timezone.utc)
-    assert _script(runner_script)._utc_stamp(when) == expected.strftime("%Y-%m-%dT%H:%M:%S")
+#: A zone 14 hours east of UTC (POSIX TZ, no zone database needed): no machine's own.
+FAR_EAST = "XYZ-14"
+
+
+def _far_east_now() -> str:
+    zone = datetime.timezone(datetime.timedelta(hours=14))
+    return datetime.datetime.now(zone).strftime("%Y-%m-%dT%H:%M:%S")
+
+
+@capabilities.BARE_PYTHON
+def test_the_stamp_is_local_time_as_in_every_other_result(
+    runner_script: str, lock_dir: Path, tmp_path: Path
+) -> None:
+    result = tmp_path / "t.xml"
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    args = [str(result), "--command", "true"]
+    before = _far_east_now()
+    proc = _bare_run(
+        _bare_python(), runner_script, args, empty, lock_dir, tmp_path, f"TZ={FAR_EAST}"
+    )
+    after = _far_east_now()
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    suite = _valid_against_the_schema(result).find("testsuite")
+    assert suite is not None
+    stamp = suite.get("timestamp", "")
+    # The control: UTC now lies 14 hours outside that window, so the zone was used.
+    utc = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%S")
+    assert not before <= utc <= after
+    assert before <= stamp <= after, (before, stamp, after)
+
+
+# --- arguments: only what the user can fix is a usage error ----------------------------------
+
+
+def test_a_bad_setting_is_a_usage_error_naming_the_result_file(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    result = tmp_path / "t.xml"
+    monkeypatch.setenv(settings.WAIT_TIMEOUT_ENV, "ten")
+    with pytest.raises(args.UsageError) as raised:
+        args.parse([str(result), "--command", "true"])
+    assert raised.value.result_file == result
+    assert f"{settings.WAIT_TIMEOUT_ENV}='ten' is not a number of seconds" in str(raised.value)
+
+
+def test_a_bug_while_parsing_shows_as_a_bug_never_as_a_usage_error(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A fault planted where settings are read: a ValueError of ours is no user's mistake."""
+
+    def broken(*_args: object, **_kwargs: object) -> settings.Settings:
+        raise ValueError("a bug of the runner")
+
+    monkeypatch.setattr(settings, "read", broken)
+    with pytest.raises(ValueError, match="a bug of the runner") as raised:
+        args.parse([str(tmp_path / "t.xml"), "--command", "true"])
+    assert type(raised.value) is ValueError

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from helpers import capabilities
 from helpers.commands import CLI, HUNG, ament, run_cli, run_runner
+from helpers.domains import free_ids
 from helpers.results import load_result
 from helpers.tiny_disk import fill, run_on_tiny_disk
 
@@ -429,3 +430,56 @@ def test_control_a_console_that_works_is_not_noted(
     assert done.returncode == 0, done.stderr
     assert "hello\n" in done.stdout
     assert "console_error" not in load_result(result).properties
+
+
+# --- what blocks an ID: the survivors the result names, never a process of an embedder -------
+
+#: A program embedding the runner, with a child of its own running throughout: two runs
+#: in a row on a pool of one ID, then what a fresh scan of its process tree finds.
+EMBEDDER = """
+import subprocess, sys
+from pathlib import Path
+from ros_isolated_test.process import supervisor
+from ros_isolated_test.runner import session, settings
+from ros_isolated_test.runner.request import Mode, RunRequest
+
+own = subprocess.Popen(["sleep", "600"])
+try:
+    codes = []
+    for name in ("first.xml", "second.xml"):
+        request = RunRequest(
+            ("true",), Mode.SHELL, settings.read(), result_file=Path(name),
+            generate_result_on_success=True,
+        )
+        codes.append(session.run(request))
+    scanned = [process.pid for process in supervisor.survivors()]
+finally:
+    own.kill()
+    own.wait()
+print("codes", *codes)
+print("own", own.pid, "scanned", *scanned)
+"""
+
+
+def test_an_embedding_programs_own_child_never_blocks_the_id(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    (domain_id,) = free_ids(1)
+    env.update(ROS_ISOLATED_TEST_DOMAINS=str(domain_id), ROS_ISOLATED_TEST_WAIT_TIMEOUT="0")
+    done = subprocess.run(
+        [sys.executable, "-c", EMBEDDER],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=HUNG,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    own, scanned = lines[-1].split(" scanned")
+    # The control: a fresh scan of the runner's tree does find the embedder's child.
+    assert own.split()[1] in scanned.split(), done.stdout
+    assert lines[-2] == "codes 0 0", done.stdout + done.stderr  # the second run got the ID
+    assert "stays blocked" not in done.stdout
+    assert "surviving_processes" not in load_result(tmp_path / "first.xml").properties

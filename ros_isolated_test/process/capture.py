@@ -12,6 +12,11 @@ reader stops reading for :data:`CONSOLE_STALL_SECONDS`: then it gets no more, an
 from __future__ import annotations
 
 import contextlib
+import os
+import select
+import stat
+
+from ros_isolated_test.text import shown
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -27,23 +32,6 @@ CONSOLE_STALL_SECONDS = 60.0
 _NEWLINE = b"\n"
 #: Why a console stopped whose reader stopped reading.
 STALLED = "its reader took no byte"
-
-
-def encoded(text: str) -> bytes:
-    r"""A runner line as UTF-8; bytes that were not (a command argument, a folder) as ``\xNN``.
-
-    Python carries such bytes as lone surrogates (``surrogateescape``), which plain
-    ``encode()`` refuses: a test named with a Latin-1 byte would crash the runner.
-    """
-    try:
-        return text.encode()
-    except UnicodeEncodeError:
-        pass
-    try:
-        raw = text.encode("utf-8", "surrogateescape")
-    except UnicodeEncodeError:  # a surrogate no byte stands for (a JSON ``\ud800``)
-        return text.encode("utf-8", "backslashreplace")
-    return raw.decode("utf-8", "backslashreplace").encode()
 
 
 class _Stopped(Exception):
@@ -151,7 +139,8 @@ class OutputCapture:
         It starts on a line of its own in each stream: after a test whose last output had
         no newline, the stream gets one first (never the tail: the test's bytes stay its own).
         """
-        data = encoded(f"{text}\n")
+        # Bytes that were not UTF-8 (a command argument, a folder) as \xNN: never a crash.
+        data = shown(f"{text}\n").encode()
         self._to_console(data if self._console_at_line_start else _NEWLINE + data)
         self._to_file(data if self._file_at_line_start else _NEWLINE + data)
 
@@ -184,8 +173,6 @@ class OutputCapture:
             return False
         if fd < 0:
             return False
-        import select
-
         poller = select.poll()
         poller.register(fd, select.POLLOUT)
         return bool(poller.poll(self._console_stall * 1000))
@@ -203,11 +190,9 @@ class OutputCapture:
             f"writing the console failed after {self.console_bytes} bytes: {reason}"
         )
         message = f"{self.console_error}; it gets no more output (the result file keeps the tail)"
-        import os
-
         with contextlib.suppress(OSError):
             # One system call, unbuffered: nothing left half-written in a buffer for exit.
-            os.write(2, encoded(f"{PREFIX}{message}\n"))
+            os.write(2, shown(f"{PREFIX}{message}\n").encode())
 
     def _to_file(self, data: bytes) -> None:
         stream = self._file
@@ -227,9 +212,6 @@ class OutputCapture:
         """Stop the copy, never the run: the console and the result file still get it all."""
         held = self.file_bytes
         try:
-            import os
-            import stat
-
             status = os.fstat(stream.fileno())
             if stat.S_ISREG(status.st_mode):
                 # What the file really holds: a buffered writer counts bytes it only kept.

@@ -448,10 +448,11 @@ def _others() -> frozenset[tuple[int, int]]:
 
 
 def survivors() -> list[proc.Stat]:
-    """Living processes in this runner's tree: after a run, what even SIGKILL did not end.
+    """Living processes in this runner's tree, scanned afresh: what even SIGKILL did not end.
 
-    The runner starts nothing but the test, so, as a subreaper, all it has left in its
-    tree is the test's. One system call when nothing is left.
+    Only for a run that :func:`run` never returned from (an error in the runner); when it
+    returns, :attr:`Outcome.survivors` is the list to use, which, unlike this scan, leaves
+    out what an embedding program started itself. One system call when nothing is left.
     """
     reaper.reap_orphans()
     if not reaper.has_children():

@@ -9,12 +9,11 @@ from __future__ import annotations
 from enum import Enum
 from pathlib import Path
 
-# Re-exported for callers that knew them here; settings.py reads and checks them.
-from ros_isolated_test.runner.settings import DEFAULT_WAIT_TIMEOUT, WAIT_TIMEOUT_ENV, Settings
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from ros_isolated_test.runner.settings import Settings
 
 __all__ = [
-    "DEFAULT_WAIT_TIMEOUT",
-    "WAIT_TIMEOUT_ENV",
     "EnvAssignment",
     "Mode",
     "RunRequest",
@@ -85,6 +84,7 @@ class RunRequest:
         self,
         command: tuple[str, ...],
         mode: Mode,
+        settings: Settings,
         *,
         result_file: Path | None = None,
         package_name: str | None = None,
@@ -95,7 +95,6 @@ class RunRequest:
         generate_result_on_success: bool = False,
         timeout: float | None = None,
         kill_grace: float = 5.0,
-        settings: Settings | None = None,
         env_origin: str = "--env",
     ) -> None:
         self.command = command
@@ -110,8 +109,7 @@ class RunRequest:
         self.timeout = timeout
         self.kill_grace = kill_grace
         #: The runner's settings (pool, lock dir, wait timeout, discovery range), read once
-        #: by the entry point; None only for a request that never runs (a usage error's
-        #: result file), or for an embedding caller: then session reads the environment.
+        #: by the entry point (settings.read): nothing deeper reads the environment.
         self.settings = settings
         #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
         self.env_origin = env_origin

@@ -29,8 +29,11 @@ from ros_isolated_test.xunit.result_file import NO_RESULT, ResultFile
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
+    from collections.abc import Sequence
     from types import FrameType
     from typing import BinaryIO
+
+    from ros_isolated_test.process import proc
 
 
 def run(request: RunRequest, console: BinaryIO | None = None) -> int:
@@ -47,11 +50,6 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
         )
         _error(console, message)
         return exit_codes.USAGE
-    if request.settings is None:
-        try:
-            request.settings = settings.read()
-        except settings.SettingsError as error:
-            return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
     clash = same_file_message(request.output_file, request.result_file)
     if clash is not None:
         return _not_run(result, console, clash, Outcome.ERROR, exit_codes.USAGE)
@@ -160,7 +158,8 @@ def _guarded(
     guard: _Guard,
 ) -> int:
     try:
-        with _domain(policy, request, config, capture) as domain_id:
+        with _domain(policy, request, config, capture) as held:
+            domain_id = None if held is None else held.domain_id
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
                 result.properties["ros_domain_id"] = str(domain_id)
@@ -187,6 +186,8 @@ def _guarded(
                 request.kill_grace,
                 on_start=guard.start,
             )
+            if held is not None:
+                held.survivors = outcome.survivors  # what blocks the ID: as named below
             # Named before the ID is released: the block note (_domain) follows.
             for leftover in outcome.leftovers:
                 capture.note(f"stopped process {leftover}, left running by the test")
@@ -275,28 +276,45 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
         supervisor.restore_handlers(previous)
 
 
+class _Held:
+    """The ID held for the test, and what of the test's tree outlived it."""
+
+    __slots__ = ("domain_id", "survivors")
+
+    def __init__(self, domain_id: int) -> None:
+        self.domain_id = domain_id
+        #: The supervisor's survivors once it returned: the authoritative list, the one
+        #: the result names. None until then: a run that ended otherwise scans afresh.
+        self.survivors: Sequence[proc.Stat] | None = None
+
+
 @contextlib.contextmanager
 def _domain(
     policy: environment.Policy,
     request: RunRequest,
     config: settings.Settings,
     capture: OutputCapture,
-) -> Iterator[int | None]:
+) -> Iterator[_Held | None]:
     if not policy.isolate:
         yield None
         return
     coordinator = DomainCoordinator(config.lock_dir, config.pool)
-    with coordinator.reserve(request.command, config.wait_timeout, capture.note) as held:
+    with coordinator.reserve(request.command, config.wait_timeout, capture.note) as reservation:
+        held = _Held(reservation.domain_id)
         try:
-            yield held.domain_id
+            yield held
         finally:
             # However the run ended: what of the test's tree still lives (not ours to
             # kill, stuck in the kernel) keeps the ID from every runner until it is gone.
-            survivors = supervisor.survivors()
+            # The supervisor's own list when it returned (never a process of an embedding
+            # program); a scan of our tree only when it did not (an error in the runner).
+            survivors = held.survivors
+            if survivors is None:
+                survivors = supervisor.survivors()
             if survivors:
                 names = ", ".join(survivor.describe() for survivor in survivors)
                 try:
-                    record = held.block_for(survivors)
+                    record = reservation.block_for(survivors)
                 except OSError as error:
                     capture.note(
                         f"cannot keep ROS_DOMAIN_ID {held.domain_id} blocked while {names} "
@@ -340,7 +358,7 @@ def _conclude(
     )
     if written == exit_codes.WRITE_OWN:
         return _adopt(result, capture, outcome, code, reason, skip)
-    tail = capture.tail_text()
+    # The tail only where it is shown: decoding it costs a passing test (locale, 64 KiB).
     if written == exit_codes.WRITE_PASSED:
         cases = [result.case(Outcome.PASSED, duration=duration)]
     elif written == exit_codes.WRITE_SKIPPED:
@@ -348,20 +366,22 @@ def _conclude(
         message = f"Test skipped: it returned {outcome.returncode}."
         cases = [result.case(Outcome.SKIPPED, message, duration)]
     elif written == exit_codes.WRITE_NO_RESULT:
-        cases = [result.case(Outcome.ERROR, f"{NO_RESULT}\n\n{tail}", duration)]
+        cases = [result.case(Outcome.ERROR, f"{NO_RESULT}\n\n{capture.tail_text()}", duration)]
         capture.note(f"{NO_RESULT} Failing it (write one, or use --generate-result-on-success)")
     else:
         kind = Outcome.ERROR if outcome.start_error is not None else Outcome.FAILURE
         detail = f"The test {reason}."
         if request.mode is Mode.AMENT:
             detail = f"{NO_RESULT} {detail}"
-        cases = [result.case(kind, f"{detail}\n\n{tail}", duration)]
+        cases = [result.case(kind, f"{detail}\n\n{capture.tail_text()}", duration)]
     output = ""
-    if exit_codes.output_lost(exit_codes.code_for(written, code), capture.file_error):
+    code = exit_codes.code_for(written, code)
+    if exit_codes.output_lost(code, capture.file_error):
         cases.append(_output_lost_case(result, capture))
-        output = tail
+        output = capture.tail_text()
+        code = exit_codes.FAILED  # a pass whose output file lost output fails
     result.write(cases, duration, output)
-    return exit_codes.code_for(written, code, any(case.outcome.failed for case in cases))
+    return code
 
 
 def _adopt(
@@ -413,7 +433,9 @@ def _output_lost_case(result: ResultFile, capture: OutputCapture) -> Case:
 def report_usage_error(message: str, result_file: Path | None) -> int:
     """Arguments that cannot be understood: say so in one line, still leave a result file."""
     _keep_standard_descriptors()
-    result = ResultFile(RunRequest(command=(), mode=Mode.AMENT, result_file=result_file))
+    # Never run: built-in settings, so a usage error never reads (nor trips on) a variable.
+    request = RunRequest((), Mode.AMENT, settings.defaults(), result_file=result_file)
+    result = ResultFile(request)
     try:
         result.prepare()
     except OSError:

@@ -37,6 +37,7 @@ __all__ = [
     "WAIT_TIMEOUT_ENV",
     "Settings",
     "SettingsError",
+    "defaults",
     "disables_isolation",
     "read",
 ]
@@ -84,7 +85,7 @@ def disables_isolation(value: str | None) -> bool:
     return value is not None and value.strip().lower() not in _FALSE_WORDS
 
 
-def seconds(text: str, name: str, fix: str) -> float:
+def _seconds(text: str, name: str, fix: str) -> float:
     """A finite, non-negative number of seconds, or :class:`SettingsError` naming ``name``.
 
     nan and inf are refused: either would silently turn a limit off.
@@ -113,7 +114,7 @@ def read(
         text = environ.get(WAIT_TIMEOUT_ENV, "").strip()
         wait_timeout = DEFAULT_WAIT_TIMEOUT
         if text:
-            wait_timeout = seconds(text, WAIT_TIMEOUT_ENV, "set e.g. 600, or unset it")
+            wait_timeout = _seconds(text, WAIT_TIMEOUT_ENV, "set e.g. 600, or unset it")
     if discovery_range is not None:
         origin = "--discovery-range"
     else:
@@ -135,3 +136,12 @@ def read(
         discovery_range=discovery_range,
         isolation_disabled=disables_isolation(environ.get(DISABLE_VAR)),
     )
+
+
+def defaults() -> Settings:
+    """The built-in settings, no variable read: for a request that never runs.
+
+    A usage error's result file needs a request, and must not fail on (or report) a
+    bad variable the user never got to.
+    """
+    return read({})

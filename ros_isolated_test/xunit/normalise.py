@@ -1,10 +1,11 @@
 """Turning what a test left behind into canonical test cases.
 
-Each producer gets something wrong for some reader (xunit-formats.md, section 7);
-the fixes are generic where they can be and keyed to a producer's shape where not:
-gtest's nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases,
-launch_testing's text-only-in-message, xmlrunner's timestamped suite names, ctest's
-missing ``errors`` and empty output, gtest and ctest disabled tests shown as passed.
+Each producer gets something wrong for some reader (a real sample of each is in
+tests/data/xunit; tests/test_normalise_samples.py says what is odd in it); the fixes
+are generic where they can be and keyed to a producer's shape where not: gtest's
+nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases, launch_testing's
+text-only-in-message, xmlrunner's timestamped suite names, ctest's missing ``errors``
+and empty output, gtest and ctest disabled tests shown as passed.
 """
 
 from __future__ import annotations

@@ -16,11 +16,13 @@ import contextlib
 import errno
 import os
 import shlex
+import stat
 import sys
 import time
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
+from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import serialise, validate
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
@@ -211,8 +213,6 @@ class ResultFile:
         flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
         fd = os.open(self.path, flags)
         try:
-            import stat
-
             if not stat.S_ISREG(os.fstat(fd).st_mode):
                 return False
             size = len(self.placeholder)
@@ -279,7 +279,7 @@ class ResultFile:
         """Whether the test left our placeholder (or nothing) in place."""
         if self.path is None:
             return True
-        if self.placeholder is not None and validate.holds_exactly(self.path, self.placeholder):
+        if self.placeholder is not None and _holds_exactly(self.path, self.placeholder):
             return True
         return not os.path.lexists(self.path)
 
@@ -315,8 +315,6 @@ def _keep_aside(path: Path, original: Path) -> None:
     a file or a whole tree, and it gives way.
     """
     _remove(original)
-    import stat
-
     mode = os.lstat(path).st_mode
     if stat.S_ISDIR(mode):
         os.rename(path, original)
@@ -330,10 +328,29 @@ def _keep_aside(path: Path, original: Path) -> None:
         shutil.copy2(path, original, follow_symlinks=False)
 
 
+def _holds_exactly(path: Path, data: bytes) -> bool:
+    """Whether the file still holds ``data`` (the placeholder the test did not replace).
+
+    Opened without blocking and read only if it is a regular file: a test may leave a
+    FIFO at the path, and that must not hang the runner.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return False
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        held = b""
+        while len(held) <= len(data) and (chunk := os.read(fd, len(data) + 1 - len(held))):
+            held += chunk
+        return held == data
+    finally:
+        os.close(fd)
+
+
 def _remove(path: Path) -> None:
     """Remove a file, a symlink or a whole directory tree at ``path``, if any."""
-    import stat
-
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
@@ -344,20 +361,6 @@ def _remove(path: Path) -> None:
         shutil.rmtree(path)  # never follows a symlink inside
     else:
         os.unlink(path)
-
-
-def shown(text: str) -> str:
-    r"""``text`` with bytes that were not UTF-8 (carried as lone surrogates) shown as ``\xNN``.
-
-    A command argument, a folder or an --env value may hold any bytes: the result shows
-    them as the output tail does, never as ``\udcNN``.
-    """
-    if text.isascii():
-        return text
-    try:
-        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-    except UnicodeEncodeError:  # a surrogate no byte stands for: the serialiser shows it
-        return text
 
 
 def _reason(error: OSError) -> str:

@@ -1,16 +1,15 @@
-"""The result file: canonical xUnit bytes, checked against our schema, written whole.
+"""A result's canonical xUnit bytes, checked against our schema; result_file writes them.
 
 A result built only from the runner's own words (passed, skipped, not run, no result
 file) has one fixed shape that the test suite validates against ``schemas/junit.xsd``;
-it is written without loading lxml. A result holding what a test's own file said is
+it is rendered without loading lxml. A result holding what a test's own file said is
 validated here, at run time, with its counts re-checked: one that fails is a bug of
-ours, and is written as a valid file that says so instead of being lost.
+ours, and becomes a valid document that says so instead of being lost.
 """
 
 from __future__ import annotations
 
 import os
-import stat
 import time
 
 from ros_isolated_test.xunit import serialise
@@ -130,24 +129,3 @@ def _internal_error(suite: Suite, found: list[str]) -> Suite:
         hostname=hostname(),
         properties={key: value for key, value in suite.properties.items() if key and value},
     )
-
-
-def holds_exactly(path: str | os.PathLike[str], data: bytes) -> bool:
-    """Whether the file still holds ``data`` (the placeholder the test did not replace).
-
-    Opened without blocking and read only if it is a regular file: a test may leave a
-    FIFO at the path, and that must not hang the runner.
-    """
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
-    except OSError:
-        return False
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return False
-        held = b""
-        while len(held) <= len(data) and (chunk := os.read(fd, len(data) + 1 - len(held))):
-            held += chunk
-        return held == data
-    finally:
-        os.close(fd)

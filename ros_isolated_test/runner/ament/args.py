@@ -225,7 +225,8 @@ def parse(argv: Sequence[str]) -> RunRequest:
             generate_result_on_success="--generate-result-on-success" in single,
             env_origin="--env (ament_add_test ENV)",
         )
-    except (UsageError, ValueError) as error:
+    except (UsageError, settings.SettingsError) as error:
+        # Only what the user can fix: any other error is a bug, and must show as one.
         raise UsageError(str(error), result_file) from None
 
 

@@ -3,12 +3,13 @@
 Print this file's path with ``ros-isolated-test runner-path`` and pass it as ``RUNNER``
 to ``ament_add_test`` or ``add_launch_test``. It only finds the installed package and
 hands its arguments over; all behaviour lives in ``ros_isolated_test``. When no Python
-can import the package, it still leaves RESULT_FILE saying why, with nothing but ``os``.
+can import the package, it still leaves RESULT_FILE saying why, importing nothing more.
 """
 
 import contextlib
 import os
 import sys
+import time  # built in and loaded at start-up: free
 
 TYPE_CHECKING = False  # typing is not imported: this file starts every test
 if TYPE_CHECKING:
@@ -97,8 +98,8 @@ def _write_not_run(argv: "list[str]", message: str) -> None:
         os.makedirs(os.path.dirname(path) or os.curdir, exist_ok=True)
         fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666)
         try:
-            # A new file's mtime is the time now: no time module needed for the stamp.
-            stamp = _utc_stamp(int(os.fstat(fd).st_mtime))
+            # Local time, as every other result of the runner is stamped.
+            stamp = time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime())
             document = _not_run_document(suite, test, command, message, stamp)
             view = memoryview(document)
             while view:
@@ -168,24 +169,6 @@ def _xml(text: str) -> str:
             shown.append(char)
     escaped = "".join(shown).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
     return escaped.replace('"', "&quot;")
-
-
-def _utc_stamp(seconds: int) -> str:
-    """``YYYY-MM-DDTHH:MM:SS`` (UTC) of a Unix time, from the civil-calendar arithmetic."""
-    days, rest = divmod(seconds, 86400)
-    # Days since 1970-01-01 to a date: 400-year eras of 146097 days, from 0000-03-01.
-    days += 719468
-    era, day_of_era = divmod(days, 146097)
-    year_of_era = (
-        day_of_era - day_of_era // 1460 + day_of_era // 36524 - day_of_era // 146096
-    ) // 365
-    day_of_year = day_of_era - (365 * year_of_era + year_of_era // 4 - year_of_era // 100)
-    month_index = (5 * day_of_year + 2) // 153
-    day = day_of_year - (153 * month_index + 2) // 5 + 1
-    month = month_index + 3 if month_index < 10 else month_index - 9
-    year = year_of_era + era * 400 + (month <= 2)
-    hour, minute, second = rest // 3600, rest // 60 % 60, rest % 60
-    return f"{year:04d}-{month:02d}-{day:02d}T{hour:02d}:{minute:02d}:{second:02d}"
 
 
 def _exit(code: int) -> "NoReturn":
