@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import peak_rss
 from helpers.commands import CLI
 from helpers.results import load_result
 from lxml import etree
@@ -106,21 +107,14 @@ def test_invalid_utf8_and_ansi_codes_leave_a_valid_result(
 
 
 def _peak_rss_kib(argv: list[str], env: dict[str, str], cwd: Path) -> tuple[int, int]:
-    """Run ``argv`` with output to /dev/null; its exit code and peak RSS (KiB).
+    """Run ``argv`` with output discarded; its exit code and peak RSS (KiB).
 
-    ``wait4`` reports the largest RSS among the child and the descendants it waited for;
-    those are sh, head and tr here, all far smaller than a Python runner.
+    The peak is the largest among the runner and the descendants it waited for; those
+    are sh, head and tr here, all far smaller than a Python runner.
     """
-    process = subprocess.Popen(argv, env=env, cwd=cwd, stdout=subprocess.DEVNULL)
-    try:
-        _, status, usage = os.wait4(process.pid, 0)
-    except BaseException:
-        process.kill()
-        process.wait()
-        raise
-    # Reaped here, not by Popen: tell it, so it never waits for the pid again.
-    process.returncode = os.waitstatus_to_exitcode(status)
-    return process.returncode, usage.ru_maxrss
+    peak = peak_rss.measure(argv, env=env, cwd=cwd)
+    assert not peak.timed_out
+    return peak.returncode, peak.max_rss // 1024
 
 
 def test_huge_output_keeps_memory_and_result_file_small(

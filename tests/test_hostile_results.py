@@ -16,19 +16,17 @@ import contextlib
 import http.client
 import os
 import random
-import signal
 import socket
 import subprocess
 import sys
 import threading
-import time
 import urllib.request
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from helpers import capabilities
+from helpers import capabilities, peak_rss
 from helpers.commands import run_runner
 from helpers.results import CaseResult, ResultSummary, load_result
 from lxml import etree
@@ -102,44 +100,27 @@ class Measured:
 def measured_runner(
     runner_script: str, args: Sequence[str], env: Mapping[str, str], cwd: Path, timeout: float
 ) -> Measured:
-    """The RUNNER as ctest calls it, with wall time and ``ru_maxrss`` from ``os.wait4``.
+    """The RUNNER as ctest calls it, with wall time and peak RSS (``helpers.peak_rss``).
 
-    ``wait4`` reports the largest RSS of the runner and of every descendant it waited for,
-    so the test command's own memory counts too. Killed (its own session) at ``timeout``.
+    The peak is the largest RSS of the runner and of every descendant it waited for, so
+    the test command's own memory counts too. Killed (its own session) at ``timeout``.
     """
     out, err = cwd / "runner.stdout", cwd / "runner.stderr"
-    started = time.monotonic()
-    with open(out, "wb") as stdout, open(err, "wb") as stderr:
-        process = subprocess.Popen(
-            [sys.executable, "-u", runner_script, *args],
-            env=dict(env),
-            cwd=cwd,
-            stdin=subprocess.DEVNULL,
-            stdout=stdout,
-            stderr=stderr,
-            start_new_session=True,
-        )
-    timed_out = False
-    while True:
-        pid, status, usage = os.wait4(process.pid, os.WNOHANG)
-        if pid:
-            break
-        if time.monotonic() - started > timeout:
-            timed_out = True
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(process.pid, signal.SIGKILL)
-            _, status, usage = os.wait4(process.pid, 0)
-            break
-        time.sleep(0.02)
-    wall = time.monotonic() - started
-    process.returncode = os.waitstatus_to_exitcode(status)
+    peak = peak_rss.measure(
+        [sys.executable, "-u", runner_script, *args],
+        env=env,
+        cwd=cwd,
+        stdout=out,
+        stderr=err,
+        timeout=timeout,
+    )
     return Measured(
-        returncode=None if timed_out else process.returncode,
+        returncode=None if peak.timed_out else peak.returncode,
         stdout=out.read_text(errors="replace"),
         stderr=err.read_text(errors="replace"),
-        wall=wall,
-        max_rss=usage.ru_maxrss * 1024,
-        timed_out=timed_out,
+        wall=peak.wall,
+        max_rss=peak.max_rss,
+        timed_out=peak.timed_out,
     )
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TextIO
 
 import pytest
+from helpers import peak_rss
 from helpers.commands import BIN, REPO
 from lxml import etree
 
@@ -191,31 +192,11 @@ print(json.dumps({
 """
 
 
-_MEASURE = """
-import os, subprocess, sys
-with open(sys.argv[1], "wb") as out:
-    process = subprocess.Popen(sys.argv[2:], stdout=out)
-_, status, usage = os.wait4(process.pid, 0)
-print(os.waitstatus_to_exitcode(status), usage.ru_maxrss * 1024)
-"""
-
-
 def child_rss(args: list[str], stdout: Path) -> int:
-    """Run ``args`` with stdout into a file; its peak RSS in bytes, from ``wait4``.
-
-    Through a small interpreter of its own: a process forked from this one (pytest, with
-    all the earlier tests' memory) would be charged this one's peak RSS as its own.
-    """
-    proc = subprocess.run(
-        [sys.executable, "-c", _MEASURE, str(stdout), *args],
-        check=True,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    code, rss = (int(word) for word in proc.stdout.split())
-    assert code == 0, proc.stderr
-    return rss
+    """Run ``args`` with stdout into a file; its peak RSS in bytes, never charged with ours."""
+    peak = peak_rss.measure(args, stdout=stdout)
+    assert peak.returncode == 0 and not peak.timed_out, f"{args[:3]} failed"
+    return peak.max_rss
 
 
 def read_in_child(path: Path) -> tuple[dict[str, object], int]:
