@@ -238,7 +238,7 @@ def status(as_json: bool) -> None:
     try:
         config = settings.read()
     except settings.SettingsError as error:
-        click.echo(f"ros-isolated-test status: error: {error}", err=True)
+        click.echo(f"ros-isolated-test: error: {error}", err=True)
         sys.exit(2)
     lock_dir = config.lock_dir
     held = held_domains(lock_dir, config.pool)
@@ -248,7 +248,7 @@ def status(as_json: bool) -> None:
     # it should be found. On stderr: --json stays parseable.
     problem = queue.shared_problem()
     if problem is not None:
-        click.echo(f"ros-isolated-test status: note: {problem}", err=True)
+        click.echo(f"ros-isolated-test: note: {problem}", err=True)
     if as_json:
         rows: list[dict[str, object]] = [
             {
