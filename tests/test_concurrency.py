@@ -260,9 +260,12 @@ def test_fifty_runners_at_once_hold_fifty_distinct_ids(crowd: Crowd, env: dict[s
     listed_after = _listed_pids(plain.stdout)
     still = {pid: kind for pid, kind in listed_after.items() if pid in theirs or kind == "runner"}
     assert not still, plain.stdout
-    if not listed_after:
-        assert plain.stdout.startswith("No domain ID of the pool is held"), plain.stdout
+    # Either nothing at all, or the table: others on a busy machine may have taken some of
+    # these IDs since (a port or a squatter, never one of our runners: checked above).
+    if plain.stdout.startswith("No domain ID of the pool is held"):
         assert os.fspath(lock_dir) in plain.stdout
+    else:
+        assert plain.stdout.split()[:3] == ["ID", "HELD", "BY"], plain.stdout
 
     elapsed = time.monotonic() - begin
     print(f"{RUNNERS} runners: {elapsed:.1f} s")
