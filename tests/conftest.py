@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from helpers import busy_machine, capabilities
 from helpers.commands import BIN, CLI, POLICY_VARS
+from helpers.domains import free_ids
 from helpers.processes import Children
 from helpers.workspace import CrosstalkBuilds
 
@@ -140,3 +141,10 @@ def crosstalk_builds(tmp_path_factory: pytest.TempPathFactory) -> CrosstalkBuild
     """
     capabilities.require(capabilities.COLCON)
     return CrosstalkBuilds(tmp_path_factory.mktemp("crosstalk_ws"))
+
+
+@pytest.fixture
+def one_id(env: dict[str, str]) -> dict[str, str]:
+    """The runner environment with a pool of one ID that is free now (lock, port, squatter)."""
+    (domain_id,) = free_ids(1)
+    return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}

@@ -14,27 +14,19 @@ import pwd
 import signal
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from helpers.commands import CLI, HUNG, run_cli
-from helpers.domains import free_ids
+from helpers.processes import poll_until
 
 from ros_isolated_test.domain_coordinator import holder
 
-DEADLINE = 60.0
 #: A user ID nobody has here: the record looks planted by another user.
 PLANTER = 4242
 FORGED = "FORGED-LINE"
 WAITING = "waiting for a free ROS_DOMAIN_ID"
-
-
-def _poll(condition: Callable[[], bool], what: str) -> None:
-    end = time.monotonic() + DEADLINE
-    while not condition():
-        assert time.monotonic() < end, what
-        time.sleep(0.1)
 
 
 def _huge() -> bytes:
@@ -63,12 +55,6 @@ HOSTILE = {
 }
 
 
-@pytest.fixture
-def one_id(env: dict[str, str]) -> dict[str, str]:
-    (domain_id,) = free_ids(1)
-    return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
-
-
 class Scene:
     """A real runner holding the pool's one ID, and a real runner queued for it."""
 
@@ -79,7 +65,7 @@ class Scene:
         self.domain_id = int(env["ROS_ISOLATED_TEST_DOMAINS"])
         self.processes: list[subprocess.Popen[bytes]] = []
         self.holder = self._start(["run", "--", "sleep", "120"], "holder.log")
-        _poll(
+        poll_until(
             lambda: any(row.get("pid") == self.holder.pid for row in self.rows()),
             "the holder never held the ID",
         )
@@ -108,7 +94,7 @@ class Scene:
             assert self.waiter.poll() is None, self.waiter_log()
             return WAITING in self.waiter_log()
 
-        _poll(waiting, "the waiter never said it waits")
+        poll_until(waiting, "the waiter never said it waits")
         return self.waiter
 
     def waiter_log(self) -> str:

@@ -18,29 +18,15 @@ from pathlib import Path
 import pytest
 from helpers import capabilities
 from helpers.commands import CLI, HUNG, run_cli
-from helpers.domains import free_ids
+from helpers.processes import poll_until
 
 from ros_isolated_test.domain_coordinator.queue import Queue
 from ros_isolated_test.process import proc
 
-DEADLINE = 60.0
 NOBODY = 65534
 WAITERS = 5
 NOTE = "the shared queue folder"
 FORGED = "FORGED-LINE"
-
-
-def _poll(condition: Callable[[], bool], what: str) -> None:
-    end = time.monotonic() + DEADLINE
-    while not condition():
-        assert time.monotonic() < end, what
-        time.sleep(0.05)
-
-
-@pytest.fixture
-def one_id(env: dict[str, str]) -> dict[str, str]:
-    (domain_id,) = free_ids(1)
-    return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
 
 
 @pytest.fixture
@@ -79,7 +65,7 @@ def _hold(env: dict[str, str], tmp_path: Path, into: list[subprocess.Popen[bytes
     go, got = tmp_path / "go", tmp_path / "holding"
     script = f"touch {got}; while [ ! -e {go} ]; do sleep 0.05; done"
     holder = _start(["run", "--", "sh", "-c", script], env, tmp_path / "holder.log", into)
-    _poll(lambda: got.exists() or holder.poll() is not None, "the holder never ran")
+    poll_until(lambda: got.exists() or holder.poll() is not None, "the holder never ran")
     assert got.exists(), (tmp_path / "holder.log").read_text()
     return go
 
@@ -133,7 +119,7 @@ def test_waiters_are_served_in_arrival_order_even_with_a_planted_queue(
             assert waiter.poll() is None, (tmp_path / f"waiter{count - 1}.log").read_text()
             return len(_tickets(lock_dir)) == count
 
-        _poll(queued, f"waiter {index} never took a ticket")
+        poll_until(queued, f"waiter {index} never took a ticket")
 
     shown = run_cli(["status", "--json"], one_id)
     rows = json.loads(shown.stdout)
@@ -204,7 +190,7 @@ def test_a_planted_ticket_breaks_neither_status_nor_the_queue(
         tmp_path / "waiter.log",
         started,
     )
-    _poll(lambda: len(_tickets(lock_dir)) == 1, "the waiter never took a ticket")
+    poll_until(lambda: len(_tickets(lock_dir)) == 1, "the waiter never took a ticket")
     name, content = HOSTILE_TICKETS[variant]
     fd = _plant_ticket(lock_dir, name(), content)
     try:

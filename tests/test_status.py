@@ -9,32 +9,18 @@ import pwd
 import signal
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from helpers import capabilities
 from helpers.commands import CLI, HUNG, run_cli
-from helpers.domains import free_ids
+from helpers.processes import poll_until
 
 from ros_isolated_test.domain_coordinator.queue import Queue
 
-DEADLINE = 60.0
 #: A user ID nobody has here.
 UNNAMED = 4242
-
-
-def _poll(condition: Callable[[], bool], what: str) -> None:
-    end = time.monotonic() + DEADLINE
-    while not condition():
-        assert time.monotonic() < end, what
-        time.sleep(0.1)
-
-
-@pytest.fixture
-def one_id(env: dict[str, str]) -> dict[str, str]:
-    (domain_id,) = free_ids(1)
-    return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
 
 
 @pytest.fixture
@@ -69,7 +55,7 @@ def test_status_lists_a_waiting_runner_with_its_pid_user_command_and_place(
     one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
 ) -> None:
     holder = _start(["run", "--", "sleep", "60"], one_id, tmp_path / "holder.log", started)
-    _poll(
+    poll_until(
         lambda: any(row.get("pid") == holder.pid for row in _rows(one_id)),
         "the holder never held the ID",
     )
@@ -88,7 +74,7 @@ def test_status_lists_a_waiting_runner_with_its_pid_user_command_and_place(
         assert waiter.poll() is None, (tmp_path / "waiter.log").read_text()
         return [row for row in _rows(one_id) if row["via"] == "queue"]
 
-    _poll(lambda: bool(queued()), "the waiting runner never showed in status --json")
+    poll_until(lambda: bool(queued()), "the waiting runner never showed in status --json")
     (row,) = queued()
     assert row["pid"] == waiter.pid
     assert row["position"] == 1

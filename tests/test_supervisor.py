@@ -161,21 +161,6 @@ def tags() -> Iterator[Callable[[], str]]:
         _kill_all_with(tag)
 
 
-@pytest.fixture
-def one_id(env: dict[str, str]) -> dict[str, str]:
-    """The runner environment with a pool of one ID whose port is free now."""
-    (domain_id,) = free_ids(1)
-    return {**env, POOL_VAR: str(domain_id)}
-
-
-def _poll(condition: Callable[[], bool], what: str) -> None:
-    deadline = time.monotonic() + DEADLINE
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out waiting for {what}")
-        time.sleep(0.02)
-
-
 # -- the red team's case: a daemon that ignores SIGTERM and forks through env -i ---------------
 
 

@@ -11,7 +11,7 @@ import select
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TypedDict
 
@@ -85,6 +85,15 @@ def wait_for(path: Path, timeout: float = DEADLINE) -> None:
         if time.monotonic() > deadline:
             pytest.fail(f"{path} did not appear within {timeout} s")
         time.sleep(0.02)
+
+
+def poll_until(condition: Callable[[], bool], what: str, timeout: float = DEADLINE) -> None:
+    """Wait until ``condition()`` holds; fail naming ``what`` after ``timeout`` (a hang stopper)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out waiting: {what}")
+        time.sleep(0.05)
 
 
 class UserKeywords(TypedDict):
