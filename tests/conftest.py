@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from helpers import busy_machine, capabilities
-from helpers.commands import BIN, CLI, POLICY_VARS
+from helpers.commands import BIN, CLI, HUNG, POLICY_VARS
 from helpers.domains import free_ids
 from helpers.processes import Children
 from helpers.workspace import CrosstalkBuilds
@@ -148,3 +148,14 @@ def one_id(env: dict[str, str]) -> dict[str, str]:
     """The runner environment with a pool of one ID that is free now (lock, port, squatter)."""
     (domain_id,) = free_ids(1)
     return {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
+
+
+@pytest.fixture
+def started() -> Iterator[list[subprocess.Popen[bytes]]]:
+    """Background processes a test starts (``helpers.commands.start_cli``); killed at its end."""
+    processes: list[subprocess.Popen[bytes]] = []
+    yield processes
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+        process.wait(HUNG)

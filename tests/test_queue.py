@@ -12,12 +12,12 @@ import json
 import os
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.commands import CLI, HUNG, run_cli
+from helpers.commands import HUNG, run_cli, start_cli
 from helpers.processes import poll_until
 
 from ros_isolated_test.domain_coordinator.queue import Queue
@@ -27,27 +27,6 @@ NOBODY = 65534
 WAITERS = 5
 NOTE = "the shared queue folder"
 FORGED = "FORGED-LINE"
-
-
-@pytest.fixture
-def started() -> Iterator[list[subprocess.Popen[bytes]]]:
-    processes: list[subprocess.Popen[bytes]] = []
-    yield processes
-    for process in processes:
-        if process.poll() is None:
-            process.kill()
-        process.wait(HUNG)
-
-
-def _start(
-    args: list[str], env: dict[str, str], log: Path, into: list[subprocess.Popen[bytes]]
-) -> subprocess.Popen[bytes]:
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            [CLI, *args], env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=out
-        )
-    into.append(process)
-    return process
 
 
 def _tickets(lock_dir: Path) -> list[Path]:
@@ -64,7 +43,7 @@ def _hold(env: dict[str, str], tmp_path: Path, into: list[subprocess.Popen[bytes
     """A real runner holding the pool's one ID until the returned file exists."""
     go, got = tmp_path / "go", tmp_path / "holding"
     script = f"touch {got}; while [ ! -e {go} ]; do sleep 0.05; done"
-    holder = _start(["run", "--", "sh", "-c", script], env, tmp_path / "holder.log", into)
+    holder = start_cli(["run", "--", "sh", "-c", script], env, tmp_path / "holder.log", into)
     poll_until(lambda: got.exists() or holder.poll() is not None, "the holder never ran")
     assert got.exists(), (tmp_path / "holder.log").read_text()
     return go
@@ -107,7 +86,7 @@ def test_waiters_are_served_in_arrival_order_even_with_a_planted_queue(
     order = tmp_path / "order"
     waiters = []
     for index in range(WAITERS):
-        waiter = _start(
+        waiter = start_cli(
             ["run", "--wait-timeout", "120", "--", "sh", "-c", f"echo {index} >> {order}"],
             one_id,
             tmp_path / f"waiter{index}.log",
@@ -184,7 +163,7 @@ def test_a_planted_ticket_breaks_neither_status_nor_the_queue(
 ) -> None:
     lock_dir = Path(one_id["ROS_ISOLATED_TEST_LOCK_DIR"])
     go = _hold(one_id, tmp_path, started)
-    waiter = _start(
+    waiter = start_cli(
         ["run", "--wait-timeout", "120", "--", "echo", "waiter-marker"],
         one_id,
         tmp_path / "waiter.log",

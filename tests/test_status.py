@@ -9,39 +9,17 @@ import pwd
 import signal
 import subprocess
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.commands import CLI, HUNG, run_cli
+from helpers.commands import HUNG, run_cli, start_cli
 from helpers.processes import poll_until
 
 from ros_isolated_test.domain_coordinator.queue import Queue
 
 #: A user ID nobody has here.
 UNNAMED = 4242
-
-
-@pytest.fixture
-def started(tmp_path: Path) -> Iterator[list[subprocess.Popen[bytes]]]:
-    processes: list[subprocess.Popen[bytes]] = []
-    yield processes
-    for process in processes:
-        if process.poll() is None:
-            process.kill()
-        process.wait(HUNG)
-
-
-def _start(
-    args: list[str], env: dict[str, str], log: Path, into: list[subprocess.Popen[bytes]]
-) -> subprocess.Popen[bytes]:
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            [CLI, *args], env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT
-        )
-    into.append(process)
-    return process
 
 
 def _rows(env: dict[str, str]) -> list[dict[str, object]]:
@@ -54,7 +32,7 @@ def _rows(env: dict[str, str]) -> list[dict[str, object]]:
 def test_status_lists_a_waiting_runner_with_its_pid_user_command_and_place(
     one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
 ) -> None:
-    holder = _start(["run", "--", "sleep", "60"], one_id, tmp_path / "holder.log", started)
+    holder = start_cli(["run", "--", "sleep", "60"], one_id, tmp_path / "holder.log", started)
     poll_until(
         lambda: any(row.get("pid") == holder.pid for row in _rows(one_id)),
         "the holder never held the ID",
@@ -63,7 +41,7 @@ def test_status_lists_a_waiting_runner_with_its_pid_user_command_and_place(
     assert [row for row in _rows(one_id) if row["via"] == "queue"] == []
     assert "Waiting for a domain ID" not in run_cli(["status"], one_id).stdout
 
-    waiter = _start(
+    waiter = start_cli(
         ["run", "--wait-timeout", "120", "--", "echo", "waiter-marker"],
         one_id,
         tmp_path / "waiter.log",

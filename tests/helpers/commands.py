@@ -68,3 +68,18 @@ def ament(
     """``python3 -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest runs it."""
     args = [str(result), "--package-name", package, *options, "--command", *command]
     return run_runner(runner_script, args, env, cwd=cwd)
+
+
+def start_cli(
+    args: Sequence[str], env: Mapping[str, str], log: Path, into: list[subprocess.Popen[bytes]]
+) -> subprocess.Popen[bytes]:
+    """``ros-isolated-test ARGS`` in the background, output into ``log``, kept in ``into``.
+
+    ``into`` is the ``started`` fixture's list: whatever is still running is killed at the end.
+    """
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [CLI, *args], env=dict(env), stdin=subprocess.DEVNULL, stdout=out, stderr=out
+        )
+    into.append(process)
+    return process
