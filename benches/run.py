@@ -33,6 +33,7 @@ import contention
 import exhaustion
 import output_volume
 import overhead
+import pytest_session
 import suite
 from common import (
     OURS,
@@ -54,6 +55,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "exhaustion": exhaustion.run,
     "output": output_volume.run,
     "suite": suite.run,
+    "pytest": pytest_session.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"

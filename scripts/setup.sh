@@ -27,13 +27,14 @@ for tool in cmake ctest make g++ unshare; do
 done
 # googletest builds a real gtest binary in the tests; node and npm run xunit-viewer.
 [[ -f /usr/include/gtest/gtest.h ]] || missing+=(libgtest-dev)
+[[ -f /usr/include/gmock/gmock.h && -d /usr/src/gmock ]] || missing+=(libgmock-dev)
 command -v npm >/dev/null 2>&1 || missing+=(npm)
 if ((${#missing[@]})); then
   echo "setup: installing system packages for: ${missing[*]}"
   sudo=""
   [[ $(id -u) -ne 0 ]] && sudo=sudo
   $sudo apt-get update -qq
-  packages=(cmake make g++ util-linux libgtest-dev)
+  packages=(cmake make g++ util-linux libgtest-dev libgmock-dev google-mock)
   command -v npm >/dev/null 2>&1 || packages+=(nodejs npm)
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${packages[@]}" >/dev/null
 fi
@@ -62,3 +63,8 @@ if [[ ! -f $stamp ]]; then
   rm -f .venv/.installed-*
   touch "$stamp"
 fi
+
+# An editable install does not copy data files: CMake's find_package(ros_isolated_test)
+# looks for the package config under .venv/share, next to .venv/bin on PATH.
+mkdir -p .venv/share/ros_isolated_test
+[[ -e .venv/share/ros_isolated_test/cmake ]] || ln -s "$root/ros_isolated_test/cmake" .venv/share/ros_isolated_test/cmake

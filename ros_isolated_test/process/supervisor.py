@@ -323,7 +323,7 @@ def run(
     """
     reaper.become_subreaper()
     start = time.monotonic()
-    others = _others()
+    others = existing_children()
     # Handlers before the test exists: a signal arriving as it starts must reach it too.
     with _child_statuses_kept(), _Signals(others) as signals:
         try:
@@ -342,10 +342,10 @@ def run(
                 # Whatever went wrong in the runner, the test must not outlive it unseen.
                 tree.signal_tree(test.pid, signal.SIGKILL)
                 test.wait()
-                _end_leftovers(0.0, others)
+                end_leftovers(0.0, others)
                 raise
             returncode = test.wait()
-            leftovers, survived = _end_leftovers(kill_grace, others)
+            leftovers, survived = end_leftovers(kill_grace, others)
             _drain(test, capture)
             if test.status_lost:
                 capture.note(
@@ -436,7 +436,7 @@ def _signal(test: _Test, signum: int) -> None:
         tree.signal_tree(test.pid, signum)
 
 
-def _others() -> frozenset[tuple[int, int]]:
+def existing_children() -> frozenset[tuple[int, int]]:
     """Processes in our tree before the test starts: a program embedding the runner's own.
 
     They are not the test's, and are never signalled. A runner started from a shell has
@@ -555,7 +555,7 @@ def _children_left(me: int, others: frozenset[tuple[int, int]]) -> bool:
     return any(process.ppid == me and process.key not in others for process in tree.processes())
 
 
-def _end_leftovers(
+def end_leftovers(
     grace: float, others: frozenset[tuple[int, int]] = frozenset()
 ) -> tuple[tuple[str, ...], tuple[proc.Stat, ...]]:
     """End what is left of the test's tree; name what had to be ended, and what survived.

@@ -14,6 +14,18 @@ from ros_isolated_test.runner.request import EnvAssignment
 from ros_isolated_test.runner.settings import DISABLE_VAR, Settings, disables_isolation
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
+#: Set beside ROS_DOMAIN_ID to the same ID wherever a runner (or the pytest plugin) holds
+#: it: a pytest started under a runner sees the ID is held for it, not preset by someone.
+HELD_VAR = "ROS_ISOLATED_TEST_HELD_DOMAIN_ID"
+
+
+def held_for_us(environ: Mapping[str, str]) -> bool:
+    """Whether ROS_DOMAIN_ID is one a runner of ours reserved for whatever runs here.
+
+    A plain ROS_DOMAIN_ID is not: the mark must name that very ID.
+    """
+    held = environ.get(HELD_VAR)
+    return held is not None and held == environ.get(DOMAIN_VAR)
 
 
 class RefusedError(Exception):
@@ -44,7 +56,7 @@ class Policy:
     def for_domain(self, domain_id: int) -> dict[str, str]:
         """The test's environment once ``domain_id`` is held."""
         env = self.discovery.apply(self.env) if self.discovery is not None else self.env
-        return {**env, DOMAIN_VAR: str(domain_id)}
+        return {**env, DOMAIN_VAR: str(domain_id), HELD_VAR: str(domain_id)}
 
 
 def apply_assignments(

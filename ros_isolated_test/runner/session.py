@@ -1,7 +1,10 @@
 """The one orchestration path: reserve a domain, run the test, write its result, pick the code.
 
 Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds a
-:class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`.
+:class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`. The pytest
+plugin, whose tests run in its own process, shares the part around the work: the
+reservation, the end of what the work left behind, the blocks, the release
+(:func:`isolation`).
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
 from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
     PoolExhaustedError,
+    Reservation,
 )
-from ros_isolated_test.process import supervisor
+from ros_isolated_test.process import reaper, supervisor
 from ros_isolated_test.process.capture import OutputCapture
 from ros_isolated_test.runner import environment, exit_codes, settings
 from ros_isolated_test.runner.discovery import DiscoveryError
@@ -29,7 +33,7 @@ from ros_isolated_test.xunit.result_file import NO_RESULT, ResultFile
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
     from types import FrameType
     from typing import BinaryIO
 
@@ -158,7 +162,7 @@ def _guarded(
     guard: _Guard,
 ) -> int:
     try:
-        with _domain(policy, request, config, capture) as held:
+        with isolation(policy, config, request.command, capture.note) as held:
             domain_id = None if held is None else held.domain_id
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
@@ -188,7 +192,7 @@ def _guarded(
             )
             if held is not None:
                 held.survivors = outcome.survivors  # what blocks the ID: as named below
-            # Named before the ID is released: the block note (_domain) follows.
+            # Named before the ID is released: the block note (isolation) follows.
             for leftover in outcome.leftovers:
                 capture.note(f"stopped process {leftover}, left running by the test")
             if outcome.leftovers:
@@ -276,8 +280,8 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
         supervisor.restore_handlers(previous)
 
 
-class _Held:
-    """The ID held for the test, and what of the test's tree outlived it."""
+class Held:
+    """The ID held for the work, and what of the work's processes outlived it."""
 
     __slots__ = ("domain_id", "survivors")
 
@@ -289,42 +293,68 @@ class _Held:
 
 
 @contextlib.contextmanager
-def _domain(
+def isolation(
     policy: environment.Policy,
-    request: RunRequest,
     config: settings.Settings,
-    capture: OutputCapture,
-) -> Iterator[_Held | None]:
+    command: Sequence[str],
+    note: Callable[[str], None],
+    sweep_grace: float | None = None,
+) -> Iterator[Held | None]:
+    """Hold a domain ID for the ``with`` block (None: isolation disabled), then release it.
+
+    With ``sweep_grace`` (work that ran in this process, the pytest plugin) this process
+    adopts orphans for the block, and after it the supervisor's sweep ends every process
+    the work left in its tree (SIGTERM, ``sweep_grace`` seconds, then SIGKILL), naming
+    each; processes that were children before the block are not the work's, and stay.
+    Either way, what survives keeps the ID blocked, and only then is the ID released.
+    Raises PoolExhaustedError or LockDirError when no ID can be had.
+    """
     if not policy.isolate:
         yield None
         return
+    others: frozenset[tuple[int, int]] = frozenset()
+    if sweep_grace is not None:
+        reaper.become_subreaper()
+        others = supervisor.existing_children()
     coordinator = DomainCoordinator(config.lock_dir, config.pool)
-    with coordinator.reserve(request.command, config.wait_timeout, capture.note) as reservation:
-        held = _Held(reservation.domain_id)
+    with coordinator.reserve(command, config.wait_timeout, note) as reservation:
+        held = Held(reservation.domain_id)
         try:
             yield held
         finally:
-            # However the run ended: what of the test's tree still lives (not ours to
-            # kill, stuck in the kernel) keeps the ID from every runner until it is gone.
-            # The supervisor's own list when it returned (never a process of an embedding
-            # program); a scan of our tree only when it did not (an error in the runner).
-            survivors = held.survivors
-            if survivors is None:
-                survivors = supervisor.survivors()
-            if survivors:
-                names = ", ".join(survivor.describe() for survivor in survivors)
-                try:
-                    record = reservation.block_for(survivors)
-                except OSError as error:
-                    capture.note(
-                        f"cannot keep ROS_DOMAIN_ID {held.domain_id} blocked while {names} "
-                        f"live: {error}; make the lock directory writable"
-                    )
-                else:
-                    capture.note(
-                        f"ROS_DOMAIN_ID {held.domain_id} stays blocked while {names} live "
-                        f"({record.name}); see ros-isolated-test status"
-                    )
+            if sweep_grace is not None:
+                # The supervisor's own sweep, as after a test it ran: one way to end a tree.
+                leftovers, held.survivors = supervisor.end_leftovers(sweep_grace, others)
+                for leftover in leftovers:
+                    note(f"stopped process {leftover}, left running by the tests")
+            _block_survivors(reservation, held, note)
+
+
+def _block_survivors(reservation: Reservation, held: Held, note: Callable[[str], None]) -> None:
+    """What of the work's tree still lives keeps the ID from every runner until it is gone.
+
+    Not ours to kill, or stuck in the kernel. The supervisor's own list when it returned
+    (never a process of an embedding program); a scan of our tree only when it did not
+    (an error in the runner).
+    """
+    survivors = held.survivors
+    if survivors is None:
+        survivors = supervisor.survivors()
+    if not survivors:
+        return
+    names = ", ".join(survivor.describe() for survivor in survivors)
+    try:
+        record = reservation.block_for(survivors)
+    except OSError as error:
+        note(
+            f"cannot keep ROS_DOMAIN_ID {held.domain_id} blocked while {names} "
+            f"live: {error}; make the lock directory writable"
+        )
+    else:
+        note(
+            f"ROS_DOMAIN_ID {held.domain_id} stays blocked while {names} live "
+            f"({record.name}); see ros-isolated-test status"
+        )
 
 
 def _conclude(

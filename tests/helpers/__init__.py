@@ -1,9 +1,11 @@
 """Shared test helpers: one module per job, imported by test modules as ``from helpers...``.
 
-Among them: commands (where the CLI and RUNNER are, running them), results (reading result files),
-canonical (what a canonical result file is), domains (picking free IDs), processes (child
-processes of a test), workspace (the example colcon package, built once per session),
-capabilities (the only way to skip). Test modules import from here, never from each other
-and never from ``conftest``, which holds fixtures only. The other ``*.py`` here are
-programs the tests run as processes (talkers, listeners).
+Among them: commands (where the CLI and RUNNER are, running them), results (reading
+result files), canonical (what a canonical result file is), domains (picking free IDs),
+processes (child processes of a test), workspace (the example colcon package, built once
+per session), cmake_package and launch_env (the CMake package's and the launch tier's
+builds), peak_rss (a child's memory, never charged with pytest's), capabilities (the only
+way to skip). Test modules import from here, never from each other and never from
+``conftest``, which holds fixtures only. The other ``*.py`` here are programs the tests
+run as processes (talkers, listeners).
 """

@@ -203,6 +203,15 @@ def _gtest() -> str | None:
     return None
 
 
+def _gmock() -> str | None:
+    """ament_cmake_gmock builds googlemock from Debian's sources under /usr/src/gmock."""
+    if (missing := _gtest()) is not None:
+        return missing
+    if not Path("/usr/include/gmock/gmock.h").is_file() or not Path("/usr/src/gmock").is_dir():
+        return "needs googlemock's headers and sources (apt install libgmock-dev google-mock)"
+    return None
+
+
 _CMAKE_ROOTS = ("/usr/lib/cmake", *map(str, Path("/usr/lib").glob("*-linux-gnu*/cmake")))
 
 
@@ -286,6 +295,8 @@ RCLPY = Capability("rclpy", _module("rclpy"))
 COLCON = Capability("colcon", _colcon)
 #: A C++ compiler, cmake, make and googletest, to build real gtest binaries.
 GTEST = Capability("gtest", _gtest)
+#: googlemock's headers and sources too, for ament_add_gmock.
+GMOCK = Capability("gmock", _gmock)
 #: A system python3.11 without filelock (see :func:`bare_python`).
 BARE_PYTHON = Capability("bare-python3.11", _bare_python)
 TOMLLIB = Capability("tomllib", _tomllib)

@@ -1,0 +1,60 @@
+# ros_isolated_test_all(): one line that puts every test of the package on our RUNNER.
+#
+# ament_add_gtest, ament_add_gmock, ament_add_pytest_test, add_launch_test and third-party
+# macros all register their tests through ament_add_test, whose RUNNER defaults to ament's
+# run_test.py. CMake lets a command be defined again and keeps the previous definition
+# callable as _<name>, so redefining ament_add_test to add our RUNNER (when the call names
+# none) reaches them all without editing any call.
+#
+# Limitations (CMake keeps ONE previous definition only):
+# - It is global from the call on: every later ament_add_test in every directory of the
+#   project is wrapped; tests added before the call are not.
+# - Calling it again is harmless (nothing is redefined a second time).
+# - If another package has already redefined ament_add_test (so _ament_add_test exists),
+#   wrapping it again would make that definition call itself forever: this is refused
+#   with an error; use the ros_isolated_add_* macros or RUNNER "${ros_isolated_test_RUNNER}"
+#   instead.
+# - If ament_add_test.cmake is loaded again after the call (ament_cmake_test found anew in a
+#   scope that did not see it found), the fresh definition replaces ours: tests added after
+#   that run through run_test.py again.
+
+macro(ros_isolated_test_all)
+  if(NOT COMMAND ament_add_test)
+    # A macro, so what find_package() sets stays in the caller's scope.
+    find_package(ament_cmake_test REQUIRED)
+  endif()
+  _ros_isolated_test_wrap_ament_add_test()
+endmacro()
+
+# Defines the wrapper. A function, not a macro: a macro would substitute its own ${ARGN}
+# into the body of the function defined here.
+function(_ros_isolated_test_wrap_ament_add_test)
+  get_property(_wrapped GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL)
+  if(_wrapped)
+    return()
+  endif()
+  if(COMMAND _ament_add_test)
+    message(FATAL_ERROR "ros_isolated_test_all(): ament_add_test was already redefined by "
+      "another CMake package, and CMake keeps only one earlier definition, so it cannot be "
+      "wrapped again. Use the ros_isolated_add_* macros, or pass "
+      "RUNNER \"\${ros_isolated_test_RUNNER}\" to ament_add_test, instead.")
+  endif()
+  set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL TRUE)
+
+  function(ament_add_test testname)
+    # The same keywords as ament_add_test itself, so exactly the words it would read as
+    # RUNNER are read as RUNNER here.
+    cmake_parse_arguments(_rit
+      "GENERATE_RESULT_FOR_RETURN_CODE_ZERO;SKIP_TEST"
+      "OUTPUT_FILE;RESULT_FILE;RUNNER;SKIP_RETURN_CODE;TIMEOUT;WORKING_DIRECTORY"
+      "APPEND_ENV;APPEND_LIBRARY_DIRS;COMMAND;ENV"
+      ${ARGN})
+    if(_rit_RUNNER)
+      _ament_add_test("${testname}" ${ARGN})
+    else()
+      _ros_isolated_test_runner(_runner)
+      # Last, so it also replaces an empty RUNNER, which ament_add_test reads as "default".
+      _ament_add_test("${testname}" ${ARGN} RUNNER "${_runner}")
+    endif()
+  endfunction()
+endfunction()

@@ -1,0 +1,173 @@
+"""The CMake package shipped in the Python distribution: find_package(ros_isolated_test).
+
+Real colcon, CMake and ctest on examples/isolated_all, found from PATH alone (no
+CMAKE_PREFIX_PATH): ros_isolated_test_all() puts six plain ament_add_test token tests on
+six distinct domain IDs, where the same package without that line hears crosstalk (the
+control); each ros_isolated_add_* macro (gtest, gmock, pytest, plain) runs its test through
+our runner; a RUNNER a call names itself wins. Quick configure-only projects check the
+edges: calling ros_isolated_test_all() twice, and the error when no runner is found.
+"""
+
+from __future__ import annotations
+
+import importlib
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from helpers import capabilities
+from helpers.cmake_package import CMAKE_FILES, PackageBuild, installed_prefix, path_only_env
+from helpers.commands import REPO
+from lxml import etree
+
+pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
+
+TOKEN_TESTS = [f"token_talker_{i}" for i in range(1, 7)]
+MACRO_TESTS = ["macro_gtest", "macro_gmock", "macro_pytest", "macro_test", "all_pytest"]
+
+
+@pytest.fixture(scope="module")
+def package_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("isolated_all_ws")
+
+
+@pytest.fixture(scope="module")
+def one_line(package_root: Path) -> PackageBuild:
+    """The package with ros_isolated_test_all() and every macro's test, built once."""
+    capabilities.require(capabilities.GTEST, capabilities.GMOCK)
+    return PackageBuild(package_root, "one_line", ["-DISOLATED_ALL=ON", "-DISOLATED_MACROS=ON"])
+
+
+@pytest.fixture(scope="module")
+def without_the_line(package_root: Path) -> PackageBuild:
+    """The control: the same six token tests without ros_isolated_test_all()."""
+    return PackageBuild(
+        package_root, "without_the_line", ["-DISOLATED_ALL=OFF", "-DISOLATED_MACROS=OFF"]
+    )
+
+
+@pytest.fixture
+def one_line_run(one_line: PackageBuild) -> str:
+    return one_line.test(jobs=6)
+
+
+def _properties(result_file: Path) -> dict[str, str]:
+    tree = etree.parse(str(result_file))
+    return {p.get("name", ""): p.get("value", "") for p in tree.iter("property")}
+
+
+def _runner_path() -> str:
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "ros-isolated-test"), "runner-path"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return done.stdout.strip()
+
+
+def test_found_from_path_alone(one_line: PackageBuild) -> None:
+    assert "CMAKE_PREFIX_PATH" not in one_line.env
+    found = Path(one_line.cache_value("ros_isolated_test_DIR"))
+    assert found == installed_prefix(one_line.base.parent) / "share/ros_isolated_test/cmake"
+
+
+def test_one_line_six_token_tests_pass_on_distinct_ids(
+    one_line: PackageBuild, one_line_run: str
+) -> None:
+    runners = one_line.runners()
+    assert {runners[name] for name in TOKEN_TESTS} == {_runner_path()}, runners
+    records = one_line.records_by_token()
+    assert len(records) == 6, f"records: {sorted(records)}\n{one_line_run}"
+    failed = {r.token: r.foreign for r in records.values() if not r.passed}
+    assert not failed, f"crosstalk despite ros_isolated_test_all(): {failed}\n{one_line_run}"
+    ids = [r.domain_id for r in records.values()]
+    assert None not in ids and len(set(ids)) == 6, f"domain IDs: {ids}"
+    summary = one_line.result_summary()
+    assert (summary.returncode, summary.errors, summary.failures) == (0, 0, 0), (
+        f"{summary.line}\n{one_line_run}"
+    )
+
+
+def test_without_the_line_the_token_tests_hear_crosstalk(without_the_line: PackageBuild) -> None:
+    output = without_the_line.test(jobs=6)
+    runners = without_the_line.runners()
+    assert all(runners[name].endswith("/run_test.py") for name in TOKEN_TESTS), runners
+    records = without_the_line.records_by_token()
+    assert len(records) == 6, f"records: {sorted(records)}\n{output}"
+    assert all(r.domain_id is None for r in records.values())
+    heard = [r for r in records.values() if not r.passed and r.foreign]
+    assert len(heard) >= 4, f"only {len(heard)} of 6 heard crosstalk: control too weak\n{output}"
+    assert without_the_line.result_summary().failures > 0
+
+
+@pytest.mark.parametrize("name", MACRO_TESTS)
+def test_each_macro_runs_through_our_runner(
+    one_line: PackageBuild, one_line_run: str, name: str
+) -> None:
+    assert one_line.runners()[name] == _runner_path()
+    (result_file,) = one_line.results_dir.glob(f"{name}.*xml")
+    properties = _properties(result_file)
+    assert properties.get("ros_domain_id", "").isdigit(), f"{properties}\n{one_line_run}"
+    assert "runner_version" in properties  # written by our runner, not by the test
+    failures = etree.parse(str(result_file)).xpath("//failure | //error")
+    assert not failures, f"{result_file}:\n{result_file.read_text()}"
+
+
+def test_a_runner_of_the_call_own_wins(one_line: PackageBuild, one_line_run: str) -> None:
+    assert one_line.runners()["own_runner"].endswith("/ament_cmake_test/cmake/run_test.py")
+    result_file = one_line.results_dir / "own_runner.xml"
+    assert "ros_domain_id" not in _properties(result_file), one_line_run
+    assert not etree.parse(str(result_file)).xpath("//failure | //error"), one_line_run
+
+
+def _configure(tmp_path: Path, body: str, *cmake_args: str) -> subprocess.CompletedProcess[str]:
+    """Configure a tiny ament_cmake project (no build, no tests run) from PATH alone."""
+    source = tmp_path / "src"
+    source.mkdir()
+    (source / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.20)\nproject(tiny NONE)\n"
+        "find_package(ament_cmake REQUIRED)\nfind_package(ros_isolated_test 0.1 REQUIRED)\n"
+        "enable_testing()\n" + body
+    )
+    env = path_only_env(installed_prefix(tmp_path))
+    return subprocess.run(
+        ["cmake", "-S", str(source), "-B", str(tmp_path / "build"),
+         f"-DPython3_EXECUTABLE={sys.executable}", *cmake_args],
+        env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+
+
+def test_calling_ros_isolated_test_all_twice_does_not_recurse(tmp_path: Path) -> None:
+    done = _configure(
+        tmp_path,
+        "ros_isolated_test_all()\nros_isolated_test_all()\n"
+        "ament_add_test(twice COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n",
+    )
+    assert done.returncode == 0, done.stderr
+    ctest_file = (tmp_path / "build" / "CTestTestfile.cmake").read_text()
+    assert f'"-u" "{_runner_path()}"' in ctest_file, ctest_file
+
+
+def test_no_runner_is_a_clear_configure_error(tmp_path: Path) -> None:
+    missing = tmp_path / "no-such-ros-isolated-test"
+    done = _configure(tmp_path, "", f"-DROS_ISOLATED_TEST_EXECUTABLE={missing}")
+    assert done.returncode != 0
+    message = " ".join(done.stderr.split())
+    assert f"'{missing} runner-path' did not print the path of the RUNNER" in message, message
+    assert "pip install ros-isolated-test" in message, message
+    assert "-DROS_ISOLATED_TEST_EXECUTABLE=" in message, message
+
+
+@capabilities.TOMLLIB
+def test_pip_installs_every_cmake_file_beside_the_command() -> None:
+    tomllib = importlib.import_module("tomllib")  # 3.11+; the suite also runs on 3.10
+    config: dict[str, Any] = tomllib.loads((REPO / "pyproject.toml").read_text())
+    shipped = config["tool"]["setuptools"]["data-files"]["share/ros_isolated_test/cmake"]
+    on_disk = sorted(str(p.relative_to(REPO)) for p in CMAKE_FILES.glob("*.cmake"))
+    assert sorted(shipped) == on_disk
+    version = config["project"]["version"]
+    text = (CMAKE_FILES / "ros_isolated_testConfigVersion.cmake").read_text()
+    assert f'set(PACKAGE_VERSION "{version}")' in text

@@ -1,0 +1,431 @@
+"""The pytest plugin: each pytest session (each xdist worker) on a domain ID of its own.
+
+Real pytest processes with the installed plugin (entry point ``ros_isolated_test``), real
+colcon over the ament_python packages of examples/python_tokens (built once per session),
+real rclpy token exchanges that fail on crosstalk, and a control for each: the same run
+with ``-p no:ros_isolated_test`` fails.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+
+import pytest
+from helpers import capabilities
+from helpers.commands import CLI, HUNG, POLICY_VARS, REPO, start_cli
+from helpers.processes import poll_until, wait_for
+from helpers.workspace import crosstalk_workspace
+
+EXAMPLES = REPO / "examples" / "python_tokens"
+ONE_TEST = ("python_tokens_dahlia", "python_tokens_ember", "python_tokens_fennel")
+OFF = ("-p", "no:ros_isolated_test")
+
+#: A test that records what it ran with: ROS_DOMAIN_ID and the discovery range.
+RECORDING_TEST = """\
+import json, os
+
+def test_records():
+    names = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+    record = {name: os.environ.get(name) for name in names}
+    with open(os.environ["PLUGIN_RECORD"], "w") as out:
+        json.dump(record, out)
+"""
+
+
+@pytest.fixture(scope="session")
+def token_workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """examples/python_tokens built once with colcon: install/ holds the python_tokens module."""
+    capabilities.require(capabilities.RCLPY, capabilities.COLCON)
+    root = tmp_path_factory.mktemp("python-tokens")
+    shutil.copytree(EXAMPLES, root / "src", ignore=shutil.ignore_patterns("__pycache__"))
+    build = subprocess.run(
+        ["colcon", "build", "--event-handlers", "console_direct-"],
+        cwd=root,
+        env=crosstalk_workspace().colcon_env(),
+        capture_output=True,
+        text=True,
+        timeout=HUNG * 3,
+        check=False,
+    )
+    assert build.returncode == 0, build.stdout + build.stderr
+    return root
+
+
+@pytest.fixture
+def ros_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
+    """colcon's environment, our own lock dir, records in tmp_path/records."""
+    clean = {
+        key: value
+        for key, value in crosstalk_workspace().colcon_env().items()
+        if key not in POLICY_VARS
+    }
+    clean["ROS_ISOLATED_TEST_LOCK_DIR"] = env["ROS_ISOLATED_TEST_LOCK_DIR"]
+    clean["CROSSTALK_RECORD_DIR"] = str(tmp_path / "records")
+    return clean
+
+
+def records(tmp_path: Path) -> dict[str, dict[str, object]]:
+    folder = tmp_path / "records"
+    found = {path.stem: json.loads(path.read_text()) for path in folder.glob("*.json")}
+    return found
+
+
+def colcon_test(root: Path, env: Mapping[str, str], *extra: str) -> str:
+    """``colcon test`` of the three one-test packages, three at once; colcon's summary."""
+    subprocess.run(
+        ["colcon", "test", "--packages-select", *ONE_TEST, "--parallel-workers", "3", *extra],
+        cwd=root,
+        env=dict(env),
+        capture_output=True,
+        timeout=HUNG * 2,
+        check=False,
+    )
+    summary = subprocess.run(
+        ["colcon", "test-result", "--all"],
+        cwd=root,
+        env=dict(env),
+        capture_output=True,
+        text=True,
+        timeout=HUNG,
+        check=False,
+    )
+    return summary.stdout
+
+
+def clear_results(root: Path) -> None:
+    for name in ONE_TEST:
+        (root / "build" / name / "pytest.xml").unlink(missing_ok=True)
+
+
+@pytest.mark.ros
+@pytest.mark.colcon
+def test_colcon_runs_three_ament_python_packages_on_three_ids(
+    token_workspace: Path, ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    clear_results(token_workspace)
+    summary = colcon_test(token_workspace, ros_env)
+    assert "Summary: 3 tests, 0 errors, 0 failures, 0 skipped" in summary, summary
+    found = records(tmp_path)
+    assert sorted(found) == ["dahlia", "ember", "fennel"]
+    ids = {str(record["domain_id"]) for record in found.values()}
+    assert len(ids) == 3 and "None" not in ids, found
+    # colcon's own result file (pytest's --junit-xml) names the ID as a suite property.
+    for token in found:
+        xml = (token_workspace / "build" / f"python_tokens_{token}" / "pytest.xml").read_text()
+        assert f'<property name="ros_domain_id" value="{found[token]["domain_id"]}"' in xml
+
+
+@pytest.mark.ros
+@pytest.mark.colcon
+def test_colcon_without_the_plugin_hears_crosstalk(
+    token_workspace: Path, ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    """The control: the same packages, the plugin off, share domain 0 and fail."""
+    clear_results(token_workspace)
+    summary = colcon_test(token_workspace, ros_env, "--pytest-args", *OFF)
+    assert "Summary: 3 tests, 0 errors, 3 failures, 0 skipped" in summary, summary
+    found = records(tmp_path)
+    assert all(record["domain_id"] is None and record["foreign"] for record in found.values())
+
+
+def run_pytest(
+    cwd: Path, env: Mapping[str, str], *args: str, timeout: float = HUNG
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", *args],
+        cwd=cwd,
+        env=dict(env),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+def xdist_env(root: Path, ros_env: dict[str, str]) -> dict[str, str]:
+    package = root / "src" / "python_tokens"
+    return {**ros_env, "PYTHONPATH": f"{package}{os.pathsep}{ros_env.get('PYTHONPATH', '')}"}
+
+
+@pytest.mark.ros
+def test_xdist_gives_each_worker_its_own_id(
+    token_workspace: Path, ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    package = token_workspace / "src" / "python_tokens"
+    junit = tmp_path / "xdist.xml"
+    done = run_pytest(
+        package, xdist_env(token_workspace, ros_env), "-n", "3", "test", f"--junit-xml={junit}"
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "ros-isolated-test: each xdist worker reserves a ROS_DOMAIN_ID" in done.stdout
+    found = records(tmp_path)
+    assert sorted(found) == ["amber", "birch", "cobalt"]
+    ids = {str(record["domain_id"]) for record in found.values()}
+    assert len(ids) == 3 and "None" not in ids, found
+    xml = junit.read_text()
+    for domain_id in ids:  # the controller's file names every worker's ID
+        assert f'value="{domain_id}"' in xml
+
+
+@pytest.mark.ros
+def test_xdist_without_the_plugin_hears_crosstalk(
+    token_workspace: Path, ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    package = token_workspace / "src" / "python_tokens"
+    done = run_pytest(package, xdist_env(token_workspace, ros_env), "-n", "3", "test", *OFF)
+    assert done.returncode == 1, done.stdout + done.stderr
+    found = records(tmp_path)
+    assert sorted(found) == ["amber", "birch", "cobalt"]
+    assert all(record["domain_id"] is None and record["foreign"] for record in found.values())
+
+
+def project(root: Path, test: str = RECORDING_TEST, package: bool = True) -> Path:
+    """A folder with one test file (and a package.xml: a ROS package), its own pytest.ini."""
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "pytest.ini").write_text("[pytest]\n")  # keep this repo's config out
+    (root / "test").mkdir(exist_ok=True)
+    (root / "test" / "test_it.py").write_text(test)
+    if package:
+        (root / "package.xml").write_text("<package format='3'><name>pkg</name></package>\n")
+    return root
+
+
+@pytest.fixture
+def plain_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
+    return {**env, "PLUGIN_RECORD": str(tmp_path / "record.json")}
+
+
+def recorded(tmp_path: Path) -> dict[str, str | None]:
+    found: dict[str, str | None] = json.loads((tmp_path / "record.json").read_text())
+    return found
+
+
+def header_lines(output: str) -> list[str]:
+    return [line for line in output.splitlines() if line.startswith("ros-isolated-test:")]
+
+
+@pytest.mark.parametrize(
+    ("package", "args", "isolated"),
+    [
+        (True, (), True),  # inside a ROS package: on by itself
+        (False, (), False),  # elsewhere: off
+        (False, ("--ros-isolation",), True),
+        (False, ("-o", "ros_isolation=true"), True),
+        (True, ("--no-ros-isolation",), False),
+        (True, ("-o", "ros_isolation=false"), False),
+        (True, OFF, False),
+    ],
+)
+def test_activation(
+    tmp_path: Path,
+    plain_env: dict[str, str],
+    package: bool,
+    args: tuple[str, ...],
+    isolated: bool,
+) -> None:
+    root = project(tmp_path / "pkg", package=package)
+    done = run_pytest(root, plain_env, *args, "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    seen = recorded(tmp_path)
+    if isolated:
+        domain = seen["ROS_DOMAIN_ID"]
+        assert domain is not None and int(domain) > 0
+        assert seen["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+        assert header_lines(done.stdout)[0].startswith(
+            f"ros-isolated-test: ROS_DOMAIN_ID {domain},"
+        )
+    else:
+        assert seen == {"ROS_DOMAIN_ID": None, "ROS_AUTOMATIC_DISCOVERY_RANGE": None}
+        assert header_lines(done.stdout) == []
+
+
+def test_explicit_isolation_refuses_a_preset_id(tmp_path: Path, plain_env: dict[str, str]) -> None:
+    root = project(tmp_path / "pkg")
+    done = run_pytest(root, {**plain_env, "ROS_DOMAIN_ID": "5"}, "--ros-isolation", "test")
+    assert done.returncode == pytest.ExitCode.USAGE_ERROR, done.stdout + done.stderr
+    assert "refusing to run: ROS_DOMAIN_ID is already set to '5'" in done.stderr
+    assert "DISABLE_ROS_ISOLATION=1" in done.stderr
+    assert not (tmp_path / "record.json").exists()
+
+
+def test_automatic_isolation_keeps_a_preset_id_and_says_so(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    root = project(tmp_path / "pkg")
+    done = run_pytest(root, {**plain_env, "ROS_DOMAIN_ID": "5"}, "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert recorded(tmp_path)["ROS_DOMAIN_ID"] == "5"
+    (line,) = header_lines(done.stdout)
+    assert "ROS_DOMAIN_ID is already set to '5'" in line and "NOT isolated" in line
+
+
+def test_disable_ros_isolation_runs_without_an_id(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, "DISABLE_ROS_ISOLATION": "1", "ROS_DOMAIN_ID": "5"}
+    done = run_pytest(root, env, "--ros-isolation", "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert recorded(tmp_path) == {"ROS_DOMAIN_ID": "5", "ROS_AUTOMATIC_DISCOVERY_RANGE": None}
+    (line,) = header_lines(done.stdout)
+    assert "WARNING: DISABLE_ROS_ISOLATION is set: running WITHOUT isolation" in line
+
+
+def test_under_the_runner_it_uses_the_runners_id(
+    tmp_path: Path, plain_env: dict[str, str], one_id: dict[str, str]
+) -> None:
+    """Nested: the runner holds the pool's only ID; the plugin takes none (or it would wait)."""
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}
+    command = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "--ros-isolation", "test"]
+    done = subprocess.run(
+        [CLI, "run", "--", *command],
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=HUNG,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
+    assert done.stdout.startswith(f"Running with ROS_DOMAIN_ID {domain}\n")
+    assert recorded(tmp_path)["ROS_DOMAIN_ID"] == domain
+    assert f"ros-isolated-test: ROS_DOMAIN_ID {domain}, held by the runner" in done.stdout
+
+
+def test_a_mark_for_another_id_is_no_runner(tmp_path: Path, plain_env: dict[str, str]) -> None:
+    """The control for nesting: only the runner's mark naming that very ID counts."""
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, "ROS_DOMAIN_ID": "5", "ROS_ISOLATED_TEST_HELD_DOMAIN_ID": "6"}
+    done = run_pytest(root, env, "--ros-isolation", "test")
+    assert done.returncode == pytest.ExitCode.USAGE_ERROR, done.stdout + done.stderr
+    assert "refusing to run" in done.stderr
+
+
+def test_pool_exhausted_waits_then_fails(
+    tmp_path: Path,
+    plain_env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "1"}
+    ready = tmp_path / "holder-ready"
+    hold = "import pathlib, sys, time; pathlib.Path(sys.argv[1]).touch(); time.sleep(300)"
+    holder = start_cli(
+        ["run", "--", sys.executable, "-c", hold, str(ready)], env, tmp_path / "holder.log", started
+    )
+    wait_for(ready)
+    done = run_pytest(root, env, "test")
+    assert done.returncode == 3, done.stdout + done.stderr
+    assert "waiting for a free ROS_DOMAIN_ID" in done.stderr
+    assert "after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
+    assert not (tmp_path / "record.json").exists()
+    holder.terminate()  # the runner ends its test, then releases the ID
+    holder.wait(HUNG)
+    again = run_pytest(root, env, "test")  # the control: the ID free, the same run passes
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert recorded(tmp_path)["ROS_DOMAIN_ID"] == one_id["ROS_ISOLATED_TEST_DOMAINS"]
+
+
+#: Leaves a double-forked daemon behind that notes its end in EVENTS, then waits for GO.
+LEAKING_TEST = """\
+import os, pathlib, signal, sys, time
+
+def test_leaks_a_daemon():
+    events, pid_file, go = (os.environ[n] for n in ("EVENTS", "PID_FILE", "GO"))
+    if os.fork() == 0:
+        os.setsid()
+        if os.fork() == 0:
+            def ended(signum, frame):
+                with open(events, "a") as out:
+                    out.write("daemon ended\\n")
+                os._exit(0)
+            signal.signal(signal.SIGTERM, ended)
+            pathlib.Path(pid_file).write_text(str(os.getpid()))
+            time.sleep(120)
+        os._exit(0)
+    deadline = time.monotonic() + 120
+    while not os.path.exists(go) and time.monotonic() < deadline:
+        time.sleep(0.05)
+"""
+
+#: The next session's test: notes that it ran, and on which ID.
+NEXT_TEST = """\
+import os
+
+def test_runs_next():
+    with open(os.environ["EVENTS"], "a") as out:
+        out.write(f"next test on {os.environ['ROS_DOMAIN_ID']}\\n")
+"""
+
+
+def test_a_leftover_daemon_is_ended_before_the_id_is_released(
+    tmp_path: Path,
+    env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    """Order of events on a one-ID pool: the daemon ends, then the next session gets the ID."""
+    events, pid_file, go = tmp_path / "events", tmp_path / "daemon.pid", tmp_path / "go"
+    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file), "GO": str(go)}
+    leaking = project(tmp_path / "leaking", LEAKING_TEST)
+    following = project(tmp_path / "following", NEXT_TEST)
+    first = start_pytest(leaking, shared, tmp_path / "first.log", started)
+    wait_for(pid_file)
+    second = start_pytest(following, shared, tmp_path / "second.log", started)
+    poll_until(
+        lambda: "waiting for a free ROS_DOMAIN_ID" in (tmp_path / "second.log").read_text(),
+        "the second session queued for the pool's one ID",
+    )
+    go.touch()
+    assert first.wait(HUNG) == 0, (tmp_path / "first.log").read_text()
+    assert second.wait(HUNG) == 0, (tmp_path / "second.log").read_text()
+    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
+    assert events.read_text().splitlines() == ["daemon ended", f"next test on {domain}"]
+    daemon = int(pid_file.read_text())
+    log = (tmp_path / "first.log").read_text()
+    assert f"stopped process {daemon}" in log, log
+    assert not Path(f"/proc/{daemon}").exists()
+
+
+def start_pytest(
+    cwd: Path, env: Mapping[str, str], log: Path, into: list[subprocess.Popen[bytes]]
+) -> subprocess.Popen[bytes]:
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "test"],
+            cwd=cwd,
+            env=dict(env),
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=out,
+        )
+    into.append(process)
+    return process
+
+
+def test_inactive_plugin_imports_nothing_of_the_runner(tmp_path: Path, env: dict[str, str]) -> None:
+    """Loaded by every pytest run: outside a ROS package it must cost nothing."""
+    check = """\
+import sys
+
+def test_modules():
+    heavy = ("lxml", "filelock", "ros_isolated_test.runner", "ros_isolated_test.domain_coordinator")
+    assert "ros_isolated_test.pytest_plugin" in sys.modules
+    loaded = [name for name in sys.modules if name.startswith(heavy)]
+    assert loaded == [], loaded
+"""
+    root = project(tmp_path / "plain", check, package=False)
+    done = run_pytest(root, env, "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    active = run_pytest(project(tmp_path / "ros", check), env, "test")  # the control
+    assert active.returncode == 1, active.stdout
+    assert "ros_isolated_test.runner" in active.stdout
