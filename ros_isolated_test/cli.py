@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from ros_isolated_test import __version__
+from ros_isolated_test.process.supervisor import KILL_GRACE
 from ros_isolated_test.runner import session, settings
 from ros_isolated_test.runner.request import Mode, RunRequest, test_name_of
 from ros_isolated_test.runner.settings import (
@@ -148,7 +149,7 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     "--kill-grace",
     type=click.FloatRange(min=0),
     callback=_finite,
-    default=5.0,
+    default=KILL_GRACE,
     show_default=True,
     metavar="SECONDS",
     help="Time between SIGTERM and SIGKILL when stopping the test.",

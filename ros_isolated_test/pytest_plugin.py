@@ -23,12 +23,12 @@ from pathlib import Path
 import pytest
 
 INI = "ros_isolation"
-#: Seconds the tests' leftover processes get to exit on SIGTERM (the runner's --kill-grace).
-KILL_GRACE = 5.0
-#: The exit code when no ID became free in time (the runner's, too).
-NO_DOMAIN = 3
 _ON_WORDS = frozenset({"1", "true", "yes", "on"})
 _OFF_WORDS = frozenset({"0", "false", "no", "off"})
+#: Where a worker tells the xdist controller it got no ID (the controller exits with it).
+_ERROR_KEY = "ros_isolation_error"
+#: Options that run no test (as --help): nothing is reserved for them.
+_NO_TEST_OPTIONS = ("help", "markers", "showfixtures", "show_fixtures_per_test", "collectonly")
 
 
 class _State:
@@ -39,8 +39,11 @@ class _State:
         self.header: list[str] = []
         #: Suite properties for pytest's --junit-xml.
         self.properties: list[tuple[str, str]] = []
-        self.domain_id: int | None = None
         self.stack = contextlib.ExitStack()
+        #: No ID could be had (an xdist worker reports it instead of crashing).
+        self.error: str | None = None
+        #: The ID is being released: a signal now must not cut the sweep short.
+        self.closing = False
 
 
 _STATE = pytest.StashKey[_State]()
@@ -104,23 +107,23 @@ def _in_ros_package(config: pytest.Config) -> bool:
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config: pytest.Config) -> None:
     """Decide, and reserve before collection (before any test module imports rclpy)."""
-    if getattr(config.option, "help", False):
-        return  # pytest --help runs no test
+    if any(getattr(config.option, name, False) for name in _NO_TEST_OPTIONS):
+        return  # --help, --markers, --fixtures, --collect-only: no test runs
     requested = _requested(config)
     if requested is False or (requested is None and not _in_ros_package(config)):
         return
     state = _State()
     config.stash[_STATE] = state
-    if not hasattr(config, "workerinput") and getattr(config.option, "dist", "no") != "no":
-        state.header.append("ros-isolated-test: each xdist worker reserves a ROS_DOMAIN_ID")
-        return  # the controller runs no test
-    _isolate(config, state, explicit=requested is True)
+    controller = not hasattr(config, "workerinput") and getattr(config.option, "dist", "no") != "no"
+    _isolate(config, state, explicit=requested is True, controller=controller)
 
 
-def _isolate(config: pytest.Config, state: _State, explicit: bool) -> None:
+def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: bool) -> None:
+    """The runner's decision, then (but in the xdist controller, which runs no test) its ID."""
     from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
     from ros_isolated_test.domain_coordinator.reservation import PoolExhaustedError
-    from ros_isolated_test.runner import environment, session, settings
+    from ros_isolated_test.process.supervisor import KILL_GRACE
+    from ros_isolated_test.runner import environment, exit_codes, session, settings
     from ros_isolated_test.runner.discovery import DiscoveryError
 
     environ = os.environ
@@ -144,33 +147,62 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool) -> None:
         return
     except (settings.SettingsError, DiscoveryError) as error:
         raise pytest.UsageError(f"ros-isolated-test: {error}") from None
-    state.header.extend(f"ros-isolated-test: {note}" for note in policy.notes)
+    if not policy.isolate:
+        lines, properties = session.summary(policy, None)
+        state.header.extend(f"ros-isolated-test: {line}" for line in lines)
+        state.properties.extend(properties.items())
+        return
+    if controller:
+        state.header.append("ros-isolated-test: each xdist worker reserves a ROS_DOMAIN_ID")
+        return  # the controller runs no test
+    _interruptible(state)
     command = ("pytest", *config.invocation_params.args)
     try:
         held = state.stack.enter_context(
             session.isolation(policy, config_settings, command, _note, KILL_GRACE)
         )
     except (PoolExhaustedError, LockDirError) as error:
-        pytest.exit(f"ros-isolated-test: error: {error}", returncode=NO_DOMAIN)
-    if held is None:
-        state.properties.append(("ros_domain_id", f"{domain or 'unset (0)'} (isolation disabled)"))
-        return
-    state.domain_id = held.domain_id
+        state.error = f"ros-isolated-test: error: {error}"
+        if hasattr(config, "workerinput"):
+            return  # said to the controller (pytest_collection): a crash would be restarted
+        pytest.exit(state.error, returncode=exit_codes.NO_DOMAIN)
+    assert held is not None  # policy.isolate
+    # Restored first on the way out (LIFO): before the sweep and the release.
+    state.stack.callback(_set_environ, dict(os.environ))
     _set_environ(policy.for_domain(held.domain_id))
-    line = f"ros-isolated-test: ROS_DOMAIN_ID {held.domain_id}"
-    if policy.discovery is not None:
-        line += f", {policy.discovery.describe()}"
-        state.properties.extend(policy.discovery.properties().items())
-        state.header.extend(f"ros-isolated-test: {w}" for w in policy.discovery.warnings)
-    state.header.insert(0, line)
-    state.properties.insert(0, ("ros_domain_id", str(held.domain_id)))
+    lines, properties = session.summary(policy, held.domain_id)
+    if policy.discovery is not None:  # its first line: the range, said beside the ID
+        lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
+    else:
+        lines.insert(0, f"ROS_DOMAIN_ID {held.domain_id}")
+    state.header.extend(f"ros-isolated-test: {line}" for line in lines)
+    state.properties.extend(properties.items())
     workeroutput = getattr(config, "workeroutput", None)
     if workeroutput is not None:
         workeroutput["ros_domain_id"] = held.domain_id
 
 
+def _interruptible(state: _State) -> None:
+    """SIGTERM and SIGHUP (ctest's, colcon's timeout, a CI cancel) end pytest as Ctrl-C does.
+
+    Without this pytest dies at once: no unconfigure, so what the tests left running is
+    never ended (a plain fork even inherits the lock) and the ID stays held. Once the
+    release began, a signal is ignored: a second Ctrl-C must not cut the sweep short.
+    Outside the main thread (an embedding program) its own handlers stay.
+    """
+    from ros_isolated_test.process import supervisor
+
+    def stop(signum: int, _frame: object) -> None:
+        if not state.closing:
+            raise KeyboardInterrupt(f"signal {signum}")
+        _note(f"signal {signum} ignored: ending what the tests left running first")
+
+    previous = supervisor.set_handlers(stop)
+    state.stack.callback(supervisor.restore_handlers, previous)
+
+
 def _set_environ(env: dict[str, str]) -> None:
-    """Make os.environ the test environment the policy built (set and removed alike)."""
+    """Make os.environ ``env`` exactly (set and removed alike)."""
     for name in [name for name in os.environ if name not in env]:
         del os.environ[name]
     for name, value in env.items():
@@ -205,14 +237,37 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             xml.add_global_property(name, value)
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection(session: pytest.Session) -> None:
+    """An xdist worker that got no ID ends here, its error in the controller's hands.
+
+    Not in pytest_configure: a worker dying there is a crash, which xdist restarts (each
+    restart waiting the whole timeout again). Ending now still sends the controller its
+    workeroutput.
+    """
+    state = session.config.stash.get(_STATE, None)
+    output = getattr(session.config, "workeroutput", None)
+    if state is not None and state.error is not None and output is not None:
+        output[_ERROR_KEY] = state.error
+        from ros_isolated_test.runner import exit_codes
+
+        session.shouldstop = state.error  # the controller stops every worker
+        pytest.exit(state.error, returncode=exit_codes.NO_DOMAIN)  # 2 would be a restart
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_testnodedown(node: object, error: object) -> None:
     """The xdist controller: each worker's ID into the controller's --junit-xml."""
     config: pytest.Config | None = getattr(node, "config", None)
     output = getattr(node, "workeroutput", None)
-    if config is None or not output or "ros_domain_id" not in output:
+    if config is None or not output:
         return
-    if config.stash.get(_STATE, None) is None or getattr(config.option, "xmlpath", None) is None:
+    state = config.stash.get(_STATE, None)
+    if state is None:
+        return
+    if _ERROR_KEY in output and state.error is None:
+        state.error = str(output[_ERROR_KEY])
+    if "ros_domain_id" not in output or getattr(config.option, "xmlpath", None) is None:
         return
     from _pytest.junitxml import xml_key
 
@@ -224,8 +279,21 @@ def pytest_testnodedown(node: object, error: object) -> None:
 
 
 @pytest.hookimpl(trylast=True)
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """The xdist controller: a worker that got no ID makes the run's code the runner's."""
+    state = session.config.stash.get(_STATE, None)
+    if state is None or state.error is None or hasattr(session.config, "workerinput"):
+        return
+    from ros_isolated_test.runner import exit_codes
+
+    _note(state.error.removeprefix("ros-isolated-test: "))
+    session.exitstatus = exit_codes.NO_DOMAIN
+
+
+@pytest.hookimpl(trylast=True)
 def pytest_unconfigure(config: pytest.Config) -> None:
     """End what the tests left running, block survivors, release: the runner's order."""
     state = config.stash.get(_STATE, None)
     if state is not None:
+        state.closing = True  # a signal now is only noted
         state.stack.close()

@@ -4,15 +4,20 @@ Real colcon, CMake and ctest on examples/isolated_all, found from PATH alone (no
 CMAKE_PREFIX_PATH): ros_isolated_test_all() puts six plain ament_add_test token tests on
 six distinct domain IDs, where the same package without that line hears crosstalk (the
 control); each ros_isolated_add_* macro (gtest, gmock, pytest, plain) runs its test through
-our runner; a RUNNER a call names itself wins. Quick configure-only projects check the
+our runner, the pytest ones with the pytest plugin on, keeping the runner's ID; a RUNNER a
+call names itself wins. Quick configure-only projects check the
 edges: calling ros_isolated_test_all() twice, and the error when no runner is found.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
+import shutil
 import subprocess
 import sys
+import sysconfig
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +31,7 @@ pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
 
 TOKEN_TESTS = [f"token_talker_{i}" for i in range(1, 7)]
 MACRO_TESTS = ["macro_gtest", "macro_gmock", "macro_pytest", "macro_test", "all_pytest"]
+PYTEST_TESTS = ("macro_pytest", "all_pytest")
 
 
 @pytest.fixture(scope="module")
@@ -114,6 +120,12 @@ def test_each_macro_runs_through_our_runner(
     assert "runner_version" in properties  # written by our runner, not by the test
     failures = etree.parse(str(result_file)).xpath("//failure | //error")
     assert not failures, f"{result_file}:\n{result_file.read_text()}"
+    if name in PYTEST_TESTS:
+        # Runner, ament_add_pytest_test and the pytest plugin together: the plugin keeps
+        # the runner's ID (no second reservation) and says so in pytest's header.
+        output = (one_line.build_dir / "ament_cmake_pytest" / f"{name}.txt").read_text()
+        held = f"ros-isolated-test: ROS_DOMAIN_ID {properties['ros_domain_id']}, held by the runner"
+        assert held in output.splitlines(), output
 
 
 def test_a_runner_of_the_call_own_wins(one_line: PackageBuild, one_line_run: str) -> None:
@@ -126,7 +138,7 @@ def test_a_runner_of_the_call_own_wins(one_line: PackageBuild, one_line_run: str
 def _configure(tmp_path: Path, body: str, *cmake_args: str) -> subprocess.CompletedProcess[str]:
     """Configure a tiny ament_cmake project (no build, no tests run) from PATH alone."""
     source = tmp_path / "src"
-    source.mkdir()
+    source.mkdir(exist_ok=True)
     (source / "CMakeLists.txt").write_text(
         "cmake_minimum_required(VERSION 3.20)\nproject(tiny NONE)\n"
         "find_package(ament_cmake REQUIRED)\nfind_package(ros_isolated_test 0.1 REQUIRED)\n"
@@ -151,6 +163,77 @@ def test_calling_ros_isolated_test_all_twice_does_not_recurse(tmp_path: Path) ->
     assert f'"-u" "{_runner_path()}"' in ctest_file, ctest_file
 
 
+def test_every_argument_passes_through_the_wrapper_intact(tmp_path: Path) -> None:
+    """ENV with spaces, APPEND_ENV, TIMEOUT, WORKING_DIRECTORY and RUNNER "" reach ctest.
+
+    Two tests in a row also show the wrapper's re-entry guard is cleared after each call.
+    """
+    workdir = tmp_path / "work dir"
+    done = _configure(
+        tmp_path,
+        "ros_isolated_test_all()\n"
+        'ament_add_test(first COMMAND true ENV "GREETING=hello there" OTHER=1\n'
+        f'  APPEND_ENV "EXTRA_PATH=/a b" TIMEOUT 77 WORKING_DIRECTORY "{workdir}"\n'
+        '  RUNNER "" GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n'
+        "ament_add_test(second COMMAND echo second)\n",
+    )
+    assert done.returncode == 0, done.stderr
+    ctest_file = (tmp_path / "build" / "CTestTestfile.cmake").read_text()
+    first = next(line for line in ctest_file.splitlines() if "[=[first]=]" in line)
+    runner = _runner_path()
+    assert f'"-u" "{runner}"' in first, first
+    assert '"--env" "GREETING=hello there" "OTHER=1"' in first, first
+    assert '"--append-env" "EXTRA_PATH=/a b"' in first, first
+    assert '"--generate-result-on-success" ' in first, first
+    assert '"--command" "true"' in first, first
+    assert f'WORKING_DIRECTORY "{workdir}"' in ctest_file, ctest_file
+    assert 'TIMEOUT "77"' in ctest_file, ctest_file
+    second = next(line for line in ctest_file.splitlines() if "[=[second]=]" in line)
+    assert f'"-u" "{runner}"' in second and '"--command" "echo" "second"' in second, second
+
+
+def test_a_wrapper_defined_after_the_line_is_a_clear_error_not_a_recursion(
+    tmp_path: Path,
+) -> None:
+    """Another package wrapping ament_add_test after ros_isolated_test_all() made CMake recurse
+    until its depth limit; the wrapper's guard names the cause and the fix instead."""
+    done = _configure(
+        tmp_path,
+        "ros_isolated_test_all()\n"
+        "function(ament_add_test testname)\n  _ament_add_test(${testname} ${ARGN})\n"
+        "endfunction()\n"
+        "ament_add_test(wrapped_twice COMMAND true)\n",
+    )
+    assert done.returncode != 0, done.stdout
+    message = " ".join(done.stderr.split())
+    assert "recursion" not in message.lower(), message
+    assert (
+        "ament_add_test(wrapped_twice) reached the wrapper of ros_isolated_test_all() "
+        "twice" in message
+    ), message
+    assert "redefined ament_add_test after ros_isolated_test_all() was called" in message
+    assert "use the ros_isolated_add_* macros" in message, message
+
+
+def test_the_macros_find_ament_packages_once_for_the_caller(tmp_path: Path) -> None:
+    """What a ros_isolated_add_* macro finds stays found: the next call looks up nothing."""
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "test_x.py").write_text("def test_x() -> None:\n    pass\n")
+    done = _configure(
+        tmp_path,
+        "ros_isolated_add_pytest_test(first test_x.py)\n"
+        'message(STATUS "after the first: FOUND=[${ament_cmake_pytest_FOUND}]")\n'
+        "ros_isolated_add_pytest_test(second test_x.py)\n",
+    )
+    assert done.returncode == 0, done.stderr
+    assert "after the first: FOUND=[1]" in done.stdout or (
+        "after the first: FOUND=[TRUE]" in done.stdout
+    ), done.stdout
+    assert done.stdout.count("Found ament_cmake_pytest") == 1, done.stdout
+    ctest_file = (tmp_path / "build" / "CTestTestfile.cmake").read_text()
+    assert ctest_file.count(f'"-u" "{_runner_path()}"') == 2, ctest_file
+
+
 def test_no_runner_is_a_clear_configure_error(tmp_path: Path) -> None:
     missing = tmp_path / "no-such-ros-isolated-test"
     done = _configure(tmp_path, "", f"-DROS_ISOLATED_TEST_EXECUTABLE={missing}")
@@ -171,3 +254,76 @@ def test_pip_installs_every_cmake_file_beside_the_command() -> None:
     version = config["project"]["version"]
     text = (CMAKE_FILES / "ros_isolated_testConfigVersion.cmake").read_text()
     assert f'set(PACKAGE_VERSION "{version}")' in text
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A real wheel of the project, built once from a copy (the checkout is never written)."""
+    root = tmp_path_factory.mktemp("wheel")
+    source = root / "src"
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(REPO / name, source / name)
+    shutil.copytree(
+        REPO / "ros_isolated_test",
+        source / "ros_isolated_test",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--disable-pip-version-check",
+         "-q", "-w", str(root / "dist"), str(source)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, f"pip wheel failed:\n{done.stdout}{done.stderr}"
+    (built,) = (root / "dist").glob("ros_isolated_test-*.whl")
+    return built
+
+
+def test_the_wheel_ships_every_cmake_file_as_share_data(wheel: Path) -> None:
+    with zipfile.ZipFile(wheel) as archive:
+        names = archive.namelist()
+    prefix = ".data/data/share/ros_isolated_test/cmake/"
+    shipped = sorted(name.split(prefix, 1)[1] for name in names if prefix in name)
+    assert shipped == sorted(p.name for p in CMAKE_FILES.glob("*.cmake")), names
+    assert "ros_isolated_test/runner/ament/run_test_isolated.py" in names, names
+
+
+def test_installed_from_the_wheel_cmake_finds_it_from_path_alone(
+    wheel: Path, tmp_path: Path
+) -> None:
+    """pip install --prefix, then a CMake project configured with only that bin/ on PATH."""
+    prefix = tmp_path / "installed"
+    done = subprocess.run(
+        # --ignore-installed: without it pip uninstalls this suite's own (editable) install
+        # from .venv before installing into the prefix.
+        [sys.executable, "-m", "pip", "install", "--no-deps", "--disable-pip-version-check",
+         "-q", "--ignore-installed", "--prefix", str(prefix), str(wheel)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, f"pip install failed:\n{done.stdout}{done.stderr}"
+    assert (Path(sys.executable).parent / "ros-isolated-test").is_file(), ".venv's install gone"
+    cmake_dir = prefix / "share" / "ros_isolated_test" / "cmake"
+    assert sorted(p.name for p in cmake_dir.iterdir()) == sorted(
+        p.name for p in CMAKE_FILES.glob("*.cmake")
+    )
+    site = sysconfig.get_path("purelib", vars={"base": str(prefix), "platbase": str(prefix)})
+    source = tmp_path / "src"
+    source.mkdir()
+    (source / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.20)\nproject(tiny NONE)\n"
+        "find_package(ament_cmake REQUIRED)\nfind_package(ros_isolated_test 0.1 REQUIRED)\n"
+        "enable_testing()\nros_isolated_test_all()\n"
+        "ament_add_test(installed COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n"
+    )
+    env = path_only_env(prefix)  # the installed bin/ first on PATH, no CMAKE_PREFIX_PATH
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, (site, env.get("PYTHONPATH"))))
+    build = tmp_path / "build"
+    done = subprocess.run(
+        ["cmake", "-S", str(source), "-B", str(build), f"-DPython3_EXECUTABLE={sys.executable}"],
+        env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    cache = (build / "CMakeCache.txt").read_text()
+    assert f"ros_isolated_test_DIR:PATH={cmake_dir}" in cache.splitlines(), cache
+    runner = Path(site) / "ros_isolated_test" / "runner" / "ament" / "run_test_isolated.py"
+    assert f'"-u" "{runner}"' in (build / "CTestTestfile.cmake").read_text()

@@ -43,6 +43,15 @@ class LaunchRun:
     records: dict[str, Record]  # what each talker wrote about itself, by token
     announced: dict[str, list[int]]  # "Running with ROS_DOMAIN_ID N" lines, by token
     result: ResultSummary
+    cmake_cache: str  # CMakeCache.txt: where each package was found
+
+
+def _cache_value(cache: str, name: str) -> str | None:
+    for line in cache.splitlines():
+        key, _, value = line.partition("=")
+        if key.split(":")[0] == name:
+            return value
+    return None
 
 
 def _launch_run(python: Path, root: Path, mode: str) -> LaunchRun:
@@ -79,6 +88,7 @@ def _launch_run(python: Path, root: Path, mode: str) -> LaunchRun:
         records=ws.read_records(root / "records"),
         announced=announced,
         result=ws.result_summary(root),
+        cmake_cache=(built / "CMakeCache.txt").read_text(),
     )
 
 
@@ -130,6 +140,12 @@ def _assert_isolated(run: LaunchRun) -> None:
 
 def test_ros_isolated_add_launch_test_four_at_once_on_distinct_ids(macro_run: LaunchRun) -> None:
     _assert_isolated(macro_run)
+
+
+def test_the_macro_comes_from_the_launch_environment_own_prefix(macro_run: LaunchRun) -> None:
+    """Found where pip would put it in the launch prefix, not through any other environment."""
+    found = _cache_value(macro_run.cmake_cache, "ros_isolated_test_DIR")
+    assert found == str(launch_env.CMAKE_PACKAGE), found
 
 
 def test_readme_runner_path_recipe_four_at_once_on_distinct_ids(recipe_run: LaunchRun) -> None:

@@ -429,3 +429,184 @@ def test_modules():
     active = run_pytest(project(tmp_path / "ros", check), env, "test")  # the control
     assert active.returncode == 1, active.stdout
     assert "ros_isolated_test.runner" in active.stdout
+
+
+@pytest.mark.parametrize("explicit", [False, True])
+def test_xdist_controller_decides_on_a_preset_id(
+    tmp_path: Path, plain_env: dict[str, str], explicit: bool
+) -> None:
+    """Said once by the controller: refused (explicit) or NOT isolated; never a crash loop."""
+    root = project(tmp_path / "pkg")
+    args = ("--ros-isolation",) if explicit else ()
+    done = run_pytest(root, {**plain_env, "ROS_DOMAIN_ID": "5"}, "-n", "2", *args, "test")
+    output = done.stdout + done.stderr
+    assert "each xdist worker reserves" not in output
+    assert "crashed" not in output
+    if explicit:
+        assert done.returncode == pytest.ExitCode.USAGE_ERROR, output
+        assert "refusing to run: ROS_DOMAIN_ID is already set to '5'" in done.stderr
+        assert not (tmp_path / "record.json").exists()
+    else:
+        assert done.returncode == 0, output
+        (line,) = header_lines(done.stdout)
+        assert "ROS_DOMAIN_ID is already set to '5'" in line and "NOT isolated" in line
+        assert recorded(tmp_path)["ROS_DOMAIN_ID"] == "5"
+
+
+def test_xdist_with_disable_ros_isolation_says_so(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, "DISABLE_ROS_ISOLATION": "1"}
+    done = run_pytest(root, env, "-n", "2", "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    (line,) = header_lines(done.stdout)
+    assert "WARNING: DISABLE_ROS_ISOLATION is set: running WITHOUT isolation" in line
+    assert recorded(tmp_path)["ROS_DOMAIN_ID"] is None
+
+
+def hold_the_one_id(
+    tmp_path: Path, env: Mapping[str, str], started: list[subprocess.Popen[bytes]]
+) -> subprocess.Popen[bytes]:
+    """A runner holding the pool's only ID until terminated."""
+    ready = tmp_path / "holder-ready"
+    hold = "import pathlib, sys, time; pathlib.Path(sys.argv[1]).touch(); time.sleep(300)"
+    holder = start_cli(
+        ["run", "--", sys.executable, "-c", hold, str(ready)], env, tmp_path / "holder.log", started
+    )
+    wait_for(ready)
+    return holder
+
+
+def test_xdist_pool_exhausted_exits_3_without_restarting_workers(
+    tmp_path: Path,
+    plain_env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "1"}
+    holder = hold_the_one_id(tmp_path, env, started)
+    done = run_pytest(root, env, "-n", "2", "test")
+    output = done.stdout + done.stderr
+    assert done.returncode == 3, output
+    assert "ros-isolated-test: error: after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
+    assert "crashed" not in output and "restarting" not in output, output
+    assert not (tmp_path / "record.json").exists()
+    holder.terminate()
+    holder.wait(HUNG)
+    again = run_pytest(root, env, "-n", "1", "test")  # the control: the ID free, it passes
+    assert again.returncode == 0, again.stdout + again.stderr
+
+
+#: Two pytest sessions in one process (an embedding program).
+TWICE = """\
+import ctypes, json, os
+import pytest
+
+def subreaper():
+    flag = ctypes.c_int(0)
+    ctypes.CDLL(None).prctl(37, ctypes.byref(flag), 0, 0, 0)  # PR_GET_CHILD_SUBREAPER
+    return flag.value
+
+seen = []
+for _ in range(2):
+    code = pytest.main(["-p", "no:cacheprovider", "test"])
+    seen.append([int(code), os.environ.get("ROS_DOMAIN_ID"),
+                 os.environ.get("ROS_ISOLATED_TEST_HELD_DOMAIN_ID"), subreaper()])
+print("SEEN " + json.dumps(seen))
+"""
+
+
+def test_os_environ_is_restored_after_the_session(
+    tmp_path: Path, plain_env: dict[str, str], one_id: dict[str, str]
+) -> None:
+    """The second session reserves again: the first left nothing of its isolation behind."""
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "1"}
+    done = subprocess.run(
+        [sys.executable, "-c", TWICE],
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=HUNG,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    (seen,) = (line for line in done.stdout.splitlines() if line.startswith("SEEN "))
+    # No ID, no held mark, no subreaper left to the embedding program.
+    assert json.loads(seen[5:]) == [[0, None, None, 0], [0, None, None, 0]]
+    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
+    starts = f"ros-isolated-test: ROS_DOMAIN_ID {domain},"
+    assert sum(line.startswith(starts) for line in header_lines(done.stdout)) == 2
+    assert "held by the runner" not in done.stdout
+
+
+@pytest.mark.parametrize("option", ["--help", "--markers", "--fixtures", "--collect-only"])
+def test_options_that_run_no_test_reserve_nothing(
+    tmp_path: Path,
+    plain_env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    option: str,
+) -> None:
+    """The pool's one ID held: they still answer at once (a reservation would fail: 3)."""
+    root = project(tmp_path / "pkg")
+    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}
+    hold_the_one_id(tmp_path, env, started)
+    done = run_pytest(root, env, option, "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "no free ROS_DOMAIN_ID" not in done.stderr
+    control = run_pytest(root, env, "test")
+    assert control.returncode == 3, control.stdout + control.stderr
+
+
+#: Forks a child without exec (it inherits everything, the lock too) that ignores SIGTERM.
+FORKING_TEST = """\
+import os, pathlib, signal, time
+
+def test_forks_and_waits():
+    events, pid_file = os.environ["EVENTS"], os.environ["PID_FILE"]
+    if os.fork() == 0:
+        def noted(signum, frame):
+            with open(events, "a") as out:
+                out.write("child got SIGTERM\\n")
+        signal.signal(signal.SIGTERM, noted)
+        pathlib.Path(pid_file + ".new").write_text(str(os.getpid()))
+        os.rename(pid_file + ".new", pid_file)  # whole, never seen empty
+        while True:
+            time.sleep(1)
+    time.sleep(120)
+"""
+
+
+@pytest.mark.parametrize("signum", [15, 1])
+def test_a_signal_ends_the_tests_leftovers_before_the_release(
+    tmp_path: Path,
+    env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    signum: int,
+) -> None:
+    """SIGTERM or SIGHUP (ctest's timeout): the sweep runs, and a second one cannot cut it."""
+    events, pid_file = tmp_path / "events", tmp_path / "child.pid"
+    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file)}
+    log = tmp_path / "pytest.log"
+    session = start_pytest(project(tmp_path / "forking", FORKING_TEST), shared, log, started)
+    wait_for(pid_file)
+    child = int(pid_file.read_text())
+    session.send_signal(signum)
+    poll_until(
+        lambda: session.poll() is not None or (events.exists() and bool(events.read_text())),
+        "the sweep's SIGTERM reached the child, or pytest ended",
+    )
+    assert events.exists() and events.read_text() == "child got SIGTERM\n", log.read_text()
+    session.send_signal(signum)  # during the grace: only noted
+    assert session.wait(HUNG) == pytest.ExitCode.INTERRUPTED, log.read_text()
+    assert not Path(f"/proc/{child}").exists()
+    assert f"stopped process {child}" in log.read_text()
+    # The ID is free at once: the next session gets it without waiting.
+    following = project(tmp_path / "following", NEXT_TEST)
+    after = run_pytest(following, {**shared, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}, "test")
+    assert after.returncode == 0, after.stdout + after.stderr

@@ -14,6 +14,10 @@
 #   wrapping it again would make that definition call itself forever: this is refused
 #   with an error; use the ros_isolated_add_* macros or RUNNER "${ros_isolated_test_RUNNER}"
 #   instead.
+# - If another package redefines ament_add_test AFTER the call, _ament_add_test becomes our
+#   wrapper, which would then call itself forever: the wrapper notices being entered again
+#   and stops with an error. Two wrappers of ament_add_test cannot be combined in either
+#   order; use the ros_isolated_add_* macros instead of ros_isolated_test_all().
 # - If ament_add_test.cmake is loaded again after the call (ament_cmake_test found anew in a
 #   scope that did not see it found), the fresh definition replaces ours: tests added after
 #   that run through run_test.py again.
@@ -42,6 +46,20 @@ function(_ros_isolated_test_wrap_ament_add_test)
   set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL TRUE)
 
   function(ament_add_test testname)
+    # _ament_add_test never calls ament_add_test again, so entering twice means it is this
+    # very wrapper (see the limitations above): without the guard, CMake recurses until
+    # its depth limit, with an error that names neither cause nor fix.
+    get_property(_entered GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_ENTERED)
+    if(_entered)
+      message(FATAL_ERROR "ros_isolated_test_all(): ament_add_test(${testname}) reached "
+        "the wrapper of ros_isolated_test_all() twice, because another CMake package "
+        "redefined ament_add_test after ros_isolated_test_all() was called (CMake keeps "
+        "only one earlier definition, so that one now calls this wrapper, and the wrapper "
+        "itself). Two wrappers of ament_add_test cannot be combined: instead of "
+        "ros_isolated_test_all(), use the ros_isolated_add_* macros, or pass "
+        "RUNNER \"\${ros_isolated_test_RUNNER}\" to ament_add_test.")
+    endif()
+    set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_ENTERED TRUE)
     # The same keywords as ament_add_test itself, so exactly the words it would read as
     # RUNNER are read as RUNNER here.
     cmake_parse_arguments(_rit
@@ -56,5 +74,6 @@ function(_ros_isolated_test_wrap_ament_add_test)
       # Last, so it also replaces an empty RUNNER, which ament_add_test reads as "default".
       _ament_add_test("${testname}" ${ARGN} RUNNER "${_runner}")
     endif()
+    set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_ENTERED FALSE)
   endfunction()
 endfunction()

@@ -13,50 +13,55 @@ function(_ros_isolated_test_runner var)
   set(${var} "${_runner}" PARENT_SCOPE)
 endfunction()
 
+# Macros, not functions: a macro runs in the caller's scope, so what find_package() sets
+# when a macro finds ament_cmake_gtest, ament_cmake_pytest, ... outlives the call, and the
+# next call neither finds the package again nor loads its files a second time. Their own
+# variables carry the _ros_isolated_test prefix, as they land in the caller's scope too.
+
 # ros_isolated_add_test(testname COMMAND ... [any ament_add_test argument])
-function(ros_isolated_add_test testname)
-  _ros_isolated_test_runner(_runner)
-  ament_add_test("${testname}" RUNNER "${_runner}" ${ARGN})
-endfunction()
+macro(ros_isolated_add_test _ros_isolated_test_name)
+  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
+  ament_add_test("${_ros_isolated_test_name}" RUNNER "${_ros_isolated_test_runner_path}"
+    ${ARGN})
+endmacro()
 
 # ros_isolated_add_gtest(target source... [any ament_add_gtest argument])
-function(ros_isolated_add_gtest target)
+macro(ros_isolated_add_gtest _ros_isolated_test_target)
   if(NOT COMMAND ament_add_gtest)
     find_package(ament_cmake_gtest REQUIRED)
   endif()
-  _ros_isolated_test_runner(_runner)
-  ament_add_gtest("${target}" RUNNER "${_runner}" ${ARGN})
-endfunction()
+  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
+  ament_add_gtest("${_ros_isolated_test_target}" RUNNER "${_ros_isolated_test_runner_path}"
+    ${ARGN})
+endmacro()
 
 # ros_isolated_add_gmock(target source... [any ament_add_gmock argument])
-function(ros_isolated_add_gmock target)
+macro(ros_isolated_add_gmock _ros_isolated_test_target)
   if(NOT COMMAND ament_add_gmock)
     find_package(ament_cmake_gmock REQUIRED)
   endif()
-  _ros_isolated_test_runner(_runner)
-  ament_add_gmock("${target}" RUNNER "${_runner}" ${ARGN})
-endfunction()
+  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
+  ament_add_gmock("${_ros_isolated_test_target}" RUNNER "${_ros_isolated_test_runner_path}"
+    ${ARGN})
+endmacro()
 
 # ros_isolated_add_pytest_test(testname path [any ament_add_pytest_test argument])
-function(ros_isolated_add_pytest_test testname path)
+macro(ros_isolated_add_pytest_test _ros_isolated_test_name _ros_isolated_test_path)
   if(NOT COMMAND ament_add_pytest_test)
     find_package(ament_cmake_pytest REQUIRED)
   endif()
-  _ros_isolated_test_runner(_runner)
-  ament_add_pytest_test("${testname}" "${path}" RUNNER "${_runner}" ${ARGN})
-endfunction()
+  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
+  ament_add_pytest_test("${_ros_isolated_test_name}" "${_ros_isolated_test_path}"
+    RUNNER "${_ros_isolated_test_runner_path}" ${ARGN})
+endmacro()
 
 # ros_isolated_add_launch_test(file [any add_launch_test argument])
-#
-# A macro, not a function: launch_testing_ament_cmake is found here only when the package
-# has a launch test, and what find_package() sets must outlive the call, or the next call
-# would load the package again.
 macro(ros_isolated_add_launch_test _ros_isolated_test_file)
   if(NOT COMMAND add_launch_test)
     find_package(launch_testing_ament_cmake REQUIRED)
   endif()
-  _ros_isolated_test_runner(_ros_isolated_test_launch_runner)
+  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
   # add_launch_test passes arguments it does not know (RUNNER) on to ament_add_test.
   add_launch_test("${_ros_isolated_test_file}"
-    RUNNER "${_ros_isolated_test_launch_runner}" ${ARGN})
+    RUNNER "${_ros_isolated_test_runner_path}" ${ARGN})
 endmacro()

@@ -14,16 +14,38 @@ import os
 _PR_SET_CHILD_SUBREAPER = 36
 
 
+_PR_GET_CHILD_SUBREAPER = 37
+
+
 def become_subreaper() -> bool:
     """Adopt orphaned descendants (Linux 3.4+); False where the kernel says no."""
     if os.getpid() == 1:
         return True  # PID 1 adopts every orphan of its namespace anyway.
+    return _prctl(_PR_SET_CHILD_SUBREAPER, 1)
+
+
+def stop_subreaper() -> bool:
+    """Adopt no more orphans: an embedding program gets back the process it had."""
+    return os.getpid() == 1 or _prctl(_PR_SET_CHILD_SUBREAPER, 0)
+
+
+def is_subreaper() -> bool:
+    """Whether this process adopts orphans already (PID 1 always does)."""
+    if os.getpid() == 1:
+        return True
+    import ctypes
+
+    flag = ctypes.c_int(0)
+    return _prctl(_PR_GET_CHILD_SUBREAPER, ctypes.addressof(flag)) and flag.value != 0
+
+
+def _prctl(option: int, argument: int) -> bool:
     import ctypes
 
     try:
         # The running process's own symbols: no ldconfig lookup (find_library runs one).
         libc = ctypes.CDLL(None, use_errno=True)
-        return bool(libc.prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) == 0)
+        return bool(libc.prctl(option, ctypes.c_ulong(argument), 0, 0, 0) == 0)
     except (OSError, AttributeError):
         return False
 

@@ -39,6 +39,8 @@ DRAIN_LIMIT_SECONDS = 1.0
 POLL_SECONDS = 0.2
 #: Signals that end a run: passed on to the test, then the same cleanup as a timeout.
 FORWARDED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: Seconds a test (and what it left running) gets to exit on SIGTERM before SIGKILL.
+KILL_GRACE = 5.0
 #: The exit code a test gets when its status was reaped by someone else: a failure.
 STATUS_LOST = 255
 #: Reset to their default in the test: Python ignores SIGPIPE, and so would the test.
@@ -313,7 +315,7 @@ def run(
     env: Mapping[str, str],
     capture: OutputCapture,
     timeout: float | None = None,
-    kill_grace: float = 5.0,
+    kill_grace: float = KILL_GRACE,
     on_start: Callable[[], None] | None = None,
 ) -> Outcome:
     """Run ``command`` to its end and its tree's end, streaming its output into ``capture``.

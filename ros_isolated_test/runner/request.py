@@ -9,6 +9,8 @@ from __future__ import annotations
 from enum import Enum
 from pathlib import Path
 
+from ros_isolated_test.process.supervisor import KILL_GRACE
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from ros_isolated_test.runner.settings import Settings
@@ -94,7 +96,7 @@ class RunRequest:
         skip_return_code: int | None = None,
         generate_result_on_success: bool = False,
         timeout: float | None = None,
-        kill_grace: float = 5.0,
+        kill_grace: float = KILL_GRACE,
         env_origin: str = "--env",
     ) -> None:
         self.command = command

@@ -166,21 +166,11 @@ def _guarded(
             domain_id = None if held is None else held.domain_id
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
-                result.properties["ros_domain_id"] = str(domain_id)
-                env = policy.for_domain(domain_id)
-                if policy.discovery is not None:
-                    capture.note(policy.discovery.describe())
-                    for warning in policy.discovery.warnings:
-                        capture.note(warning)
-                    result.properties.update(policy.discovery.properties())
-            else:
-                result.properties["ros_domain_id"] = policy.env.get(
-                    environment.DOMAIN_VAR, "unset (0)"
-                )
-                result.properties["isolation"] = "disabled"
-                env = policy.env
-            for note in policy.notes:
-                capture.note(note)
+            lines, properties = summary(policy, domain_id)
+            for line in lines:
+                capture.note(line)
+            result.properties.update(properties)
+            env = policy.env if domain_id is None else policy.for_domain(domain_id)
             capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
             outcome = supervisor.run(
                 request.command,
@@ -194,7 +184,7 @@ def _guarded(
                 held.survivors = outcome.survivors  # what blocks the ID: as named below
             # Named before the ID is released: the block note (isolation) follows.
             for leftover in outcome.leftovers:
-                capture.note(f"stopped process {leftover}, left running by the test")
+                capture.note(leftover_note(leftover))
             if outcome.leftovers:
                 result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
             survivors = [survivor.describe() for survivor in outcome.survivors]
@@ -218,6 +208,31 @@ def _guarded(
         # It came while the final word was being written: written again, saying so.
         result.rewrite()
     return code
+
+
+def summary(policy: environment.Policy, domain_id: int | None) -> tuple[list[str], dict[str, str]]:
+    """What a run on ``domain_id`` (None: isolation disabled) says first, and its properties.
+
+    One wording for the runner's output and the pytest plugin's header.
+    """
+    lines: list[str] = []
+    properties: dict[str, str] = {}
+    if domain_id is not None:
+        properties["ros_domain_id"] = str(domain_id)
+        if policy.discovery is not None:
+            lines.append(policy.discovery.describe())
+            lines.extend(policy.discovery.warnings)
+            properties.update(policy.discovery.properties())
+    else:
+        properties["ros_domain_id"] = policy.env.get(environment.DOMAIN_VAR, "unset (0)")
+        properties["isolation"] = "disabled"
+    lines.extend(policy.notes)
+    return lines, properties
+
+
+def leftover_note(leftover: str) -> str:
+    """The line naming a process the work left running, ended by the sweep."""
+    return f"stopped process {leftover}, left running by the test"
 
 
 class Interrupted(Exception):
@@ -313,21 +328,27 @@ def isolation(
         yield None
         return
     others: frozenset[tuple[int, int]] = frozenset()
+    adopted = False
     if sweep_grace is not None:
-        reaper.become_subreaper()
+        # Ours for the block only: an embedding program is given back as it was.
+        adopted = not reaper.is_subreaper() and reaper.become_subreaper()
         others = supervisor.existing_children()
-    coordinator = DomainCoordinator(config.lock_dir, config.pool)
-    with coordinator.reserve(command, config.wait_timeout, note) as reservation:
-        held = Held(reservation.domain_id)
-        try:
-            yield held
-        finally:
-            if sweep_grace is not None:
-                # The supervisor's own sweep, as after a test it ran: one way to end a tree.
-                leftovers, held.survivors = supervisor.end_leftovers(sweep_grace, others)
-                for leftover in leftovers:
-                    note(f"stopped process {leftover}, left running by the tests")
-            _block_survivors(reservation, held, note)
+    try:
+        coordinator = DomainCoordinator(config.lock_dir, config.pool)
+        with coordinator.reserve(command, config.wait_timeout, note) as reservation:
+            held = Held(reservation.domain_id)
+            try:
+                yield held
+            finally:
+                if sweep_grace is not None:
+                    # The supervisor's own sweep, as after a test it ran: one way to end a tree.
+                    leftovers, held.survivors = supervisor.end_leftovers(sweep_grace, others)
+                    for leftover in leftovers:
+                        note(leftover_note(leftover))
+                _block_survivors(reservation, held, note)
+    finally:
+        if adopted:
+            reaper.stop_subreaper()
 
 
 def _block_survivors(reservation: Reservation, held: Held, note: Callable[[str], None]) -> None:

@@ -21,6 +21,7 @@ POLICY_VARS = (
     "DISABLE_ROS_ISOLATION",
     "ROS_ISOLATED_TEST_DOMAINS",
     "ROS_ISOLATED_TEST_LOCK_DIR",
+    "ROS_ISOLATED_TEST_HELD_DOMAIN_ID",
 )
 #: Only stops a hung test; no test's verdict depends on it.
 HUNG = 120

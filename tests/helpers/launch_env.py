@@ -6,7 +6,10 @@ outside tier (``../shared``), and its pytest plugin breaks pytest 9, which the s
 ros extra (read from pyproject.toml, so the two never drift), ``pytest<9``, the vendored
 ``launch`` packages (``--no-deps``: their metadata names packages PyPI spells otherwise),
 ``launch_testing_ament_cmake`` installed by CMake into its prefix, and this project as an
-editable install of the checkout.
+editable install of the checkout. An editable install copies no data files, so the CMake
+package is linked in by hand where pip would put it (``share/ros_isolated_test/cmake``
+beside ``bin/ros-isolated-test``): the launch tier finds it in its own prefix, never
+through another environment's.
 
 It is built once and kept in ``.venv-launch/`` (git-ignored), keyed by a hash of
 everything it is made of; a change to any of those builds it again. A lock keeps two
@@ -32,6 +35,9 @@ from helpers.commands import REPO
 HOME = REPO / ".venv-launch"
 PREFIX = HOME / "env"
 PYTHON = PREFIX / "bin" / "python"
+#: Where pip would install the CMake package, and what is linked there instead.
+CMAKE_PACKAGE = PREFIX / "share" / "ros_isolated_test" / "cmake"
+CMAKE_FILES = REPO / "ros_isolated_test" / "cmake"
 #: The vendored Python packages, in dependency order.
 PYTHON_PACKAGES = ("launch", "launch_xml", "launch_yaml", "launch_testing")
 #: What the vendored packages need from PyPI (their setup.py names them otherwise or not).
@@ -112,18 +118,28 @@ def _build(log: Path) -> None:
 
 
 def _project_fingerprint() -> str:
-    """A hash of what the editable install copies or registers (data files, entry points)."""
-    digest = hashlib.sha256((REPO / "pyproject.toml").read_bytes())
-    for path in sorted((REPO / "ros_isolated_test" / "cmake").glob("*")):
-        digest.update(path.name.encode() + path.read_bytes())
-    return digest.hexdigest()[:16]
+    """A hash of what the editable install registers (entry points, dependencies)."""
+    return hashlib.sha256((REPO / "pyproject.toml").read_bytes()).hexdigest()[:16]
+
+
+def _link_cmake_package() -> None:
+    """``share/ros_isolated_test/cmake`` in PREFIX: the checkout's files, live."""
+    link = CMAKE_PACKAGE
+    link.parent.mkdir(parents=True, exist_ok=True)
+    if link.is_symlink() and link.resolve() == CMAKE_FILES.resolve():
+        return
+    if link.is_symlink() or link.is_file():
+        link.unlink()
+    elif link.is_dir():
+        shutil.rmtree(link)
+    link.symlink_to(CMAKE_FILES)
 
 
 def ensure() -> Path:
     """The environment's Python, built now unless a build of the same inputs is there.
 
-    This project is installed again (a few seconds) when only its own pyproject.toml or
-    CMake files changed: an editable install copies those, it does not link them.
+    This project is installed again (a few seconds) when only its pyproject.toml changed;
+    its Python and CMake files are the checkout's own, through links.
     """
     HOME.mkdir(exist_ok=True)
     built = PREFIX / f".built-{_fingerprint()}"
@@ -141,4 +157,5 @@ def ensure() -> Path:
             for stale in PREFIX.glob(".project-*"):
                 stale.unlink()
             installed.touch()
+        _link_cmake_package()
     return PYTHON
