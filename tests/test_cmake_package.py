@@ -5,8 +5,10 @@ CMAKE_PREFIX_PATH): ros_isolated_test_all() puts six plain ament_add_test token 
 six distinct domain IDs, where the same package without that line hears crosstalk (the
 control); each ros_isolated_add_* macro (gtest, gmock, pytest, plain) runs its test through
 our runner, the pytest ones with the pytest plugin on, keeping the runner's ID; a RUNNER a
-call names itself wins. Quick configure-only projects check the
-edges: calling ros_isolated_test_all() twice, and the error when no runner is found.
+call names itself wins. Quick configure-only projects check the edges: calling
+ros_isolated_test_all() twice, a wrapper defined after it (an error, not a recursion),
+every argument passing through the wrapper, macros finding packages once, and the error
+when no runner is found. A real wheel installs the CMake files where CMake finds them.
 """
 
 from __future__ import annotations
