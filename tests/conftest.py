@@ -152,10 +152,19 @@ def one_id(env: dict[str, str]) -> dict[str, str]:
 
 @pytest.fixture
 def started() -> Iterator[list[subprocess.Popen[bytes]]]:
-    """Background processes a test starts (``helpers.commands.start_cli``); killed at its end."""
+    """Background processes a test starts (``helpers.commands.start_cli``); ended at its end.
+
+    SIGTERM first: a runner passes it on and ends its test's tree before it exits, where
+    SIGKILL would leave the test running, orphaned, on its ID.
+    """
     processes: list[subprocess.Popen[bytes]] = []
     yield processes
     for process in processes:
         if process.poll() is None:
+            process.terminate()
+    for process in processes:
+        try:
+            process.wait(HUNG)
+        except subprocess.TimeoutExpired:
             process.kill()
-        process.wait(HUNG)
+            process.wait(HUNG)
