@@ -134,18 +134,22 @@ def test_colcon_without_the_plugin_hears_crosstalk(
     assert all(record["domain_id"] is None and record["foreign"] for record in found.values())
 
 
+PYTEST = (sys.executable, "-m", "pytest", "-p", "no:cacheprovider")
+
+
+def run_in(
+    cwd: Path, env: Mapping[str, str], argv: list[str], timeout: float = HUNG
+) -> subprocess.CompletedProcess[str]:
+    """``argv`` as a real process in ``cwd``, output captured as text."""
+    return subprocess.run(
+        argv, cwd=cwd, env=dict(env), capture_output=True, text=True, timeout=timeout, check=False
+    )
+
+
 def run_pytest(
     cwd: Path, env: Mapping[str, str], *args: str, timeout: float = HUNG
 ) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", *args],
-        cwd=cwd,
-        env=dict(env),
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        check=False,
-    )
+    return run_in(cwd, env, [*PYTEST, *args], timeout)
 
 
 def xdist_env(root: Path, ros_env: dict[str, str]) -> dict[str, str]:
@@ -283,16 +287,7 @@ def test_under_the_runner_it_uses_the_runners_id(
     """Nested: the runner holds the pool's only ID; the plugin takes none (or it would wait)."""
     root = project(tmp_path / "pkg")
     env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}
-    command = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "--ros-isolation", "test"]
-    done = subprocess.run(
-        [CLI, "run", "--", *command],
-        cwd=root,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=HUNG,
-        check=False,
-    )
+    done = run_in(root, env, [CLI, "run", "--", *PYTEST, "--ros-isolation", "test"])
     assert done.returncode == 0, done.stdout + done.stderr
     domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
     assert done.stdout.startswith(f"Running with ROS_DOMAIN_ID {domain}\n")
@@ -524,15 +519,7 @@ def test_os_environ_is_restored_after_the_session(
     """The second session reserves again: the first left nothing of its isolation behind."""
     root = project(tmp_path / "pkg")
     env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "1"}
-    done = subprocess.run(
-        [sys.executable, "-c", TWICE],
-        cwd=root,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=HUNG,
-        check=False,
-    )
+    done = run_in(root, env, [sys.executable, "-c", TWICE])
     assert done.returncode == 0, done.stdout + done.stderr
     (seen,) = (line for line in done.stdout.splitlines() if line.startswith("SEEN "))
     # No ID, no held mark, no subreaper left to the embedding program.
