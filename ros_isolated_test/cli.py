@@ -42,7 +42,9 @@ Exit codes:
 
 ENVIRONMENT_HELP = f"""\b
 Environment:
-  {POOL_ENV}          domain IDs to hand out (default 1-101, e.g. 1-50,215-232)
+  {POOL_ENV}          domain IDs to hand out (e.g. 1-50,215-232); default 1-101,
+                                     less any whose DDS ports fall in the host's
+                                     net.ipv4.ip_local_port_range
   {LOCK_DIR_ENV}         the lock directory shared by all runners on the machine
   {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
   {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
@@ -226,11 +228,15 @@ def status(as_json: bool) -> None:
     """List every domain ID in use on this machine, and by whom; then who waits for one.
 
     HELD BY is "runner" (a ros-isolated-test runner holds its lock), "port" (its TCP
-    port 32768+ID is bound: upstream's domain_coordinator or another program),
+    port 32768+ID is bound: upstream's domain_coordinator, Kilted's rmw_test_fixture
+    or another program), "participant" (a DDS participant outside any runner is
+    bound to the ID's UDP ports, whoever started it and however it chose the ID),
+    "survivor" (a process of an earlier test that its runner could not end) or
     "squatter" (a live process has ROS_DOMAIN_ID=<id> in its environment without
-    holding it: a test that outlived its runner, a shell's export) or "survivor" (a
-    process of an earlier test that its runner could not end). The coordinator skips
-    all of them. Runners queued for an ID follow, in the order they get one
+    holding it: a test that outlived a killed runner, a shell's export). The
+    coordinator skips all of them; squatters once their ID's last holder died holding
+    it (a clean release leaves none). Runners queued for an ID follow, in the order
+    they get one
     (in --json: rows with "via": "queue", "domain_id": null and their "position").
     """
     from ros_isolated_test.domain_coordinator.queue import Queue
@@ -241,6 +247,8 @@ def status(as_json: bool) -> None:
     except settings.SettingsError as error:
         click.echo(f"ros-isolated-test: error: {error}", err=True)
         sys.exit(2)
+    for note in config.notes:  # the pool a runner here would use; on stderr: --json parses
+        click.echo(f"ros-isolated-test: {note}", err=True)
     lock_dir = config.lock_dir
     held = held_domains(lock_dir, config.pool)
     queue = Queue(lock_dir)
@@ -256,6 +264,7 @@ def status(as_json: bool) -> None:
                 "domain_id": item.domain_id,
                 "via": item.via,
                 **(item.holder.as_dict() if item.holder else {}),
+                **({"ports": list(item.ports)} if item.ports else {}),
             }
             for item in held
         ]
@@ -278,14 +287,14 @@ def status(as_json: bool) -> None:
 
 
 def _print_held(held: list[HeldDomain]) -> None:
+    from ros_isolated_test.domain_coordinator.status import anonymous_holder
+
     click.echo(f"{'ID':>3}  {'HELD BY':<8} {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
     kinds = {"lock": "runner", "port": "port", "environment": "squatter"}
     for item in held:
         kind = kinds.get(item.via, item.via)
         if item.holder is None:
-            who = "port 32768+ID taken (upstream domain_coordinator or another program)"
-            if item.via == "lock":
-                who = "held (no holder record)"
+            who = anonymous_holder(item)
             click.echo(f"{item.domain_id:>3}  {kind:<8} {'-':>7}  {'-':<10} {'-':<19}  {who}")
             continue
         holder = item.holder

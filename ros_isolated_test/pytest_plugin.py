@@ -170,7 +170,7 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
     # Restored first on the way out (LIFO): before the sweep and the release.
     state.stack.callback(_set_environ, dict(os.environ))
     _set_environ(policy.for_domain(held.domain_id))
-    lines, properties = session.summary(policy, held.domain_id)
+    lines, properties = session.summary(policy, held.domain_id, config_settings)
     if policy.discovery is not None:  # its first line: the range, said beside the ID
         lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
     else:

@@ -9,25 +9,42 @@ from helpers.commands import run_cli
 from lxml import etree
 
 from ros_isolated_test.domain_coordinator import POOL_ENV, PoolSpecError, parse_pool
-from ros_isolated_test.domain_coordinator.pool import pool_from_env
+from ros_isolated_test.domain_coordinator.pool import (
+    DDS_PORT_SPAN,
+    HIGHEST_VALID_ID,
+    LINUX_DEFAULT_PORT_RANGE,
+    PORT_RANGE_FILE,
+    choose_pool,
+    dds_ports,
+    default_pool,
+    explicit_warnings,
+    id_ranges,
+    in_port_range,
+    parse_port_range,
+    pool_from_env,
+    read_port_range,
+)
+from ros_isolated_test.runner import settings
 
 DEFAULT_POOL = tuple(range(1, 102))
+#: Linux's default range, given explicitly: these tests must not depend on this host's.
+LINUX = LINUX_DEFAULT_PORT_RANGE
 
 
 def test_default_pool_is_1_to_101_without_0() -> None:
-    assert pool_from_env({}) == DEFAULT_POOL
-    assert 0 not in pool_from_env({})
+    assert pool_from_env({}, LINUX) == DEFAULT_POOL
+    assert 0 not in pool_from_env({}, LINUX)
 
 
 @pytest.mark.parametrize("value", ["", "   ", "\t"])
 def test_empty_variable_means_the_default(value: str) -> None:
-    assert pool_from_env({POOL_ENV: value}) == DEFAULT_POOL
+    assert pool_from_env({POOL_ENV: value}, LINUX) == DEFAULT_POOL
 
 
 def test_pool_from_env_reads_the_process_environment(monkeypatch: pytest.MonkeyPatch) -> None:
-    assert pool_from_env() == DEFAULT_POOL
+    assert pool_from_env(port_range=LINUX) == DEFAULT_POOL
     monkeypatch.setenv(POOL_ENV, "7-9")
-    assert pool_from_env() == (7, 8, 9)
+    assert pool_from_env(port_range=LINUX) == (7, 8, 9)
 
 
 @pytest.mark.parametrize(
@@ -50,7 +67,7 @@ def test_pool_from_env_reads_the_process_environment(monkeypatch: pytest.MonkeyP
 )
 def test_valid_specs(spec: str, expected: tuple[int, ...]) -> None:
     assert parse_pool(spec) == expected
-    assert pool_from_env({POOL_ENV: spec}) == expected
+    assert pool_from_env({POOL_ENV: spec}, LINUX) == expected
 
 
 @pytest.mark.parametrize(
@@ -91,7 +108,7 @@ def test_invalid_specs_name_the_bad_part(spec: str, bad_part: str, why: str) -> 
     assert "\n" not in message
 
     with pytest.raises(PoolSpecError) as from_env:
-        pool_from_env({POOL_ENV: spec})
+        pool_from_env({POOL_ENV: spec}, LINUX)
     env_message = str(from_env.value)
     assert env_message.startswith(f"{POOL_ENV}: ")
     assert bad_part in env_message
@@ -125,6 +142,188 @@ def test_only_plain_ascii_decimal_digits_are_ids(spec: str) -> None:
     """
     with pytest.raises(PoolSpecError):
         parse_pool(spec)
+
+
+# -- the ephemeral port range -------------------------------------------------------------
+
+
+def test_a_domain_needs_74_ports_from_7400_plus_250_per_id() -> None:
+    """Multicast at +0, then +10/+11 + 2*i for the 32 participants LOCALHOST announces."""
+    assert DDS_PORT_SPAN == 11 + 2 * 31
+    assert dds_ports(0) == (7400, 7473)
+    assert dds_ports(5) == (8650, 8723)  # measured: a participant on 5 binds 8660 and 8661
+    assert dds_ports(HIGHEST_VALID_ID) == (65400, 65473)
+
+
+@pytest.mark.parametrize(
+    ("domain_id", "inside"),
+    [(1, False), (101, False), (102, True), (150, True), (214, True), (215, False), (232, False)],
+)
+def test_linux_default_range_holds_102_to_214(domain_id: int, inside: bool) -> None:
+    assert in_port_range(domain_id, LINUX) is inside
+
+
+def test_the_default_range_leaves_the_default_pool_as_it_was() -> None:
+    assert default_pool(LINUX) == (DEFAULT_POOL, ())
+    assert choose_pool({}, LINUX) == (DEFAULT_POOL, ())
+
+
+@pytest.mark.parametrize(
+    ("port_range", "domain_id", "inside"),
+    [
+        ((dds_ports(50)[1], 60999), 50, True),  # the range starts at 50's last port
+        ((dds_ports(50)[1] + 1, 60999), 50, False),  # one above it
+        ((1024, dds_ports(51)[0]), 51, True),  # the range ends at 51's first port
+        ((1024, dds_ports(51)[0] - 1), 51, False),  # one below it
+        ((dds_ports(60)[0] + 5, dds_ports(60)[0] + 5), 60, True),  # a one-port range inside
+        ((dds_ports(60)[0] + 5, dds_ports(60)[0] + 5), 59, False),
+        ((dds_ports(60)[0] + 5, dds_ports(60)[0] + 5), 61, False),
+    ],
+)
+def test_both_ends_of_the_range_count(
+    port_range: tuple[int, int], domain_id: int, inside: bool
+) -> None:
+    """Linux's range is inclusive at both ends, and one shared port is a clash."""
+    assert in_port_range(domain_id, port_range) is inside
+
+
+def test_a_lower_range_leaves_out_51_to_101_in_one_line() -> None:
+    pool, notes = default_pool((20000, 60999))
+    assert pool == tuple(range(1, 51))  # 50 ends at 19973, 51 starts at 20150
+    assert len(notes) == 1 and "\n" not in notes[0]
+    assert notes[0].startswith("IDs 51-101 left out of the default pool, which is 1-50 here:")
+    assert "20000-60999 (net.ipv4.ip_local_port_range)" in notes[0]
+    assert f"set {POOL_ENV} to choose IDs yourself (clear of it: 1-50, 215-232)" in notes[0]
+
+
+def test_a_range_below_the_default_leaves_out_the_lowest_ids() -> None:
+    pool, notes = default_pool((7000, 19999))
+    assert pool == tuple(range(51, 102))
+    assert notes[0].startswith("IDs 1-50 left out of the default pool, which is 51-101 here:")
+
+
+def test_one_id_left_out_is_named_alone() -> None:
+    pool, notes = default_pool((dds_ports(101)[0], 60999))
+    assert pool == tuple(range(1, 101))
+    assert notes[0].startswith("ID 101 left out of the default pool, which is 1-100 here:")
+
+
+def test_the_default_pool_never_reaches_beyond_1_to_101() -> None:
+    """On a host whose range holds 1-101 but not 215-232, no ID is added: that is an error."""
+    with pytest.raises(PoolSpecError) as raised:
+        default_pool((1024, 61000))
+    message = str(raised.value)
+    assert "\n" not in message
+    assert "no ID of the default domain pool 1-101 is usable" in message
+    assert "1024-61000 (net.ipv4.ip_local_port_range)" in message
+    assert f"set {POOL_ENV} to IDs clear of it (215-232)" in message
+    assert "move or narrow the range" in message
+
+
+def test_a_range_covering_every_id_is_an_error_naming_both_fixes() -> None:
+    with pytest.raises(PoolSpecError) as raised:
+        choose_pool({}, (1024, 65535))
+    message = str(raised.value)
+    assert f"set {POOL_ENV} to IDs anyway (none of 1-232 is clear)" in message
+    assert "move or narrow the range" in message
+    with pytest.raises(settings.SettingsError, match="no ID of the default domain pool"):
+        settings.read({}, port_range=(1024, 65535))
+
+
+def test_usage_errors_never_trip_on_the_port_range() -> None:
+    """A usage error's result file is built from the defaults, on any host."""
+    assert settings.defaults().pool == DEFAULT_POOL
+    assert settings.defaults().notes == ()
+
+
+@pytest.mark.parametrize(
+    ("spec", "named"),
+    [
+        ("100-110,150,5", "IDs 102-110, 150 "),
+        ("150", "ID 150 "),
+        ("214,102,103,104", "IDs 102-104, 214 "),
+    ],
+)
+def test_an_explicit_pool_is_used_as_given_with_one_warning(spec: str, named: str) -> None:
+    pool, notes = choose_pool({POOL_ENV: spec}, LINUX)
+    assert pool == parse_pool(spec)
+    assert len(notes) == 1 and "\n" not in notes[0]
+    assert notes[0].startswith(f"WARNING: {POOL_ENV} names {named}whose DDS ports fall in ")
+    assert "32768-60999 (net.ipv4.ip_local_port_range)" in notes[0]
+    assert "used as given" in notes[0]
+
+
+@pytest.mark.parametrize("spec", ["1-101", "1-50,215-232", "101", "215"])
+def test_an_explicit_pool_clear_of_the_range_says_nothing(spec: str) -> None:
+    assert choose_pool({POOL_ENV: spec}, LINUX) == (parse_pool(spec), ())
+    assert explicit_warnings(parse_pool(spec), LINUX) == ()
+
+
+def test_settings_carry_the_notes() -> None:
+    assert settings.read({}, port_range=(20000, 60999)).notes == default_pool((20000, 60999))[1]
+    assert settings.read({POOL_ENV: "150"}, port_range=LINUX).notes == explicit_warnings(
+        (150,), LINUX
+    )
+    assert settings.read({}, port_range=LINUX).notes == ()
+
+
+@pytest.mark.parametrize(
+    ("ids", "text"),
+    [
+        ([], ""),
+        ([7], "7"),
+        ([3, 1, 2], "1-3"),
+        ([1, 2, 3, 5, 7, 8], "1-3, 5, 7-8"),
+        ((150, 102, 103, 110, 104), "102-104, 110, 150"),
+        ([4, 4, 5], "4-5"),
+    ],
+)
+def test_id_ranges_compresses_consecutive_ids(ids: list[int], text: str) -> None:
+    assert id_ranges(ids) == text
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("32768\t60999\n", (32768, 60999)),
+        ("  20000   60999  ", (20000, 60999)),
+        ("5000 5000", (5000, 5000)),
+        ("", None),
+        ("32768", None),
+        ("32768 60999 1", None),
+        ("a b", None),
+        ("60999 32768", None),
+        ("0 100", None),
+        ("1 65536", None),
+        ("-1 5", None),
+        ("1_0 20", None),
+    ],
+)
+def test_parse_port_range(text: str, expected: tuple[int, int] | None) -> None:
+    assert parse_port_range(text) == expected
+
+
+def test_read_port_range_reads_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "ip_local_port_range"
+    path.write_text("20000\t60999\n")
+    assert read_port_range(str(path)) == (20000, 60999)
+
+
+@pytest.mark.parametrize("content", [None, "", "garbled\n", "60999 20000\n"])
+def test_an_unreadable_or_garbled_range_is_linux_default(
+    tmp_path: Path, content: str | None
+) -> None:
+    path = tmp_path / "ip_local_port_range"
+    if content is not None:
+        path.write_text(content)
+    assert read_port_range(str(path)) == LINUX
+
+
+def test_the_host_range_is_read_from_proc() -> None:
+    with open(PORT_RANGE_FILE) as handle:
+        low, high = map(int, handle.read().split())
+    assert read_port_range() == (low, high)
+    assert choose_pool({}) == default_pool((low, high))
 
 
 # -- the CLI with a bad ROS_ISOLATED_TEST_DOMAINS --------------------------------------------

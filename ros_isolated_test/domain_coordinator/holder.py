@@ -192,6 +192,30 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
     return path
 
 
+def mark_held(lock_dir: Path, domain_id: int) -> Path | None:
+    """The user's record for the ID as an empty file, when a full one cannot be written.
+
+    On a full disk a file with no data still fits: its name and time alone tell the
+    next holder that this one took the ID (``escaped``). None when even that fails.
+    """
+    path = record_path(lock_dir, domain_id)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError:
+        return None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_uid != os.getuid():
+            return None
+        os.utime(fd)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return path
+
+
 def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:
     """Every valid record for the ID, newest first, display-safe; the others are skipped.
 

@@ -10,7 +10,9 @@ falls back to a lock file of its own for that ID and still cannot collide.
 
 The lock is filelock's (see ``flock``): a filelock ``FileLock`` on an ID's lock file
 and our reservation of that ID exclude each other. An ID whose last test left
-survivors stays taken while they live (see ``block``).
+survivors stays taken while they live (see ``block``), as does one a DDS participant
+is bound to (``participants``) or, after a holder died holding it, one a process
+still carries in ROS_DOMAIN_ID (``escaped``).
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator import holder, participants, port_guard
 from ros_isolated_test.domain_coordinator.block import blocking_survivors, write_block
+from ros_isolated_test.domain_coordinator.escaped import escaped_processes
 from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
 from ros_isolated_test.domain_coordinator.lock_dir import (
     LockDirError,
@@ -267,14 +270,16 @@ class DomainCoordinator:
         """A free ID of the pool, held; None when all are taken.
 
         An ID counts as free only when its lock and its TCP port can both be taken (so
-        upstream's ``domain_coordinator`` on this machine is respected), no survivor of
-        its last test lives (a block record; one lstat when there is none) and no live
-        process carries it in its environment. That last check, a scan of every
-        process, runs once, when the first ID is held (lock and port): runners that
-        find every ID taken never pay it.
+        upstream's coordinators on this machine, Jazzy's and Kilted's, are respected),
+        no survivor of its last test lives (a block record; one lstat when there is
+        none), no DDS participant on it is bound in this network namespace (one read of
+        the UDP tables, when the first ID is held: runners that find every ID taken
+        never pay it) and, only when its last holder died holding it, no live process
+        carries it in ROS_DOMAIN_ID (see ``escaped``). Nothing here grows with the
+        number of processes on the machine, except that last look, for that one ID.
         """
         ensure_lock_dir(self.lock_dir)
-        squatted: set[int] | None = None
+        bound: dict[int, list[int]] | None = None
         released = _released_at(self.lock_dir)
         remaining = self.candidates(released)
         spread = False
@@ -294,13 +299,14 @@ class DomainCoordinator:
                 port.close()
                 port = None
             if port is not None:
-                if squatted is None:
-                    squatted = set(squatters.scan(set(self.pool)))
-                if domain_id not in squatted:
+                if bound is None:
+                    bound = participants.bound_domains()
+                if domain_id not in bound and not escaped_processes(self.lock_dir, domain_id):
                     try:
                         record: Path | None = holder.write_record(self.lock_dir, domain_id, command)
                     except OSError:
-                        record = None  # status shows "no holder record"; the ID stays held
+                        # An empty record, if even that: it still says "held" should we die.
+                        record = holder.mark_held(self.lock_dir, domain_id)
                     return Reservation(domain_id, lock_fd, port, record, self.lock_dir)
                 port.close()
             if lock_fd is not None:

@@ -1,7 +1,8 @@
 """What ``ros-isolated-test status`` reports: every domain ID in use on this machine.
 
 An ID is in use when a runner holds its lock, when something binds its TCP port
-(upstream's ``domain_coordinator``, another program), or when a live process carries
+(upstream's ``domain_coordinator``, Kilted's ``rmw_test_fixture``, another program),
+when a DDS participant is bound to its UDP ports, or when a live process carries
 it in ROS_DOMAIN_ID (a test that outlived its runner, a shell's export): a squatter,
 or while a block record names a live survivor of its last test (one the runner could
 not end).
@@ -20,7 +21,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, port_guard, squatters
+from ros_isolated_test.domain_coordinator import holder, participants, port_guard, squatters
 from ros_isolated_test.domain_coordinator.block import blocking_survivors
 from ros_isolated_test.domain_coordinator.reservation import probe_lock
 from ros_isolated_test.process import proc
@@ -30,11 +31,16 @@ _LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
 
 @dataclass(frozen=True)
 class HeldDomain:
-    """One ID in use: ``via`` is ``lock`` (a runner), ``port``, ``environment`` or ``survivor``."""
+    """One ID in use, and by what.
+
+    ``via`` is ``lock`` (a runner), ``port``, ``participant``, ``environment`` or
+    ``survivor``; ``ports`` are a participant's UDP ports (its owner is not known).
+    """
 
     domain_id: int
     via: str
     holder: holder.Holder | None
+    ports: tuple[int, ...] = ()
 
 
 def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
@@ -52,6 +58,7 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                 candidates.add(int(match.group(1)))
     held: list[HeldDomain] = []
     found = squatters.scan(candidates)
+    bound = participants.bound_domains()
     for domain_id in sorted(candidates):
         holders: set[int] = set()
         if probe_lock(lock_dir, domain_id):
@@ -60,6 +67,8 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
             holders = {record.pid for record in records}
         elif port_guard.port_is_taken(domain_id):
             held.append(HeldDomain(domain_id, "port", None))
+        elif domain_id in bound:  # a holder's own test is a participant too: not listed
+            held.append(HeldDomain(domain_id, "participant", None, tuple(bound[domain_id])))
         for squatter in found.get(domain_id, ()):
             if holders & squatters.ancestors(squatter.pid):
                 continue  # the holder's own test, not a squatter
@@ -107,7 +116,30 @@ def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> s
                 f"{item.holder.command[:60]}"
             )
         else:
-            parts.append(f"{item.domain_id}: {'port taken' if item.via == 'port' else item.via}")
+            parts.append(f"{item.domain_id}: {_anonymous(item)}")
     if len(items) > limit:
         parts.append(f"and {len(items) - limit} more")
     return "; ".join(parts) or "see ros-isolated-test status"
+
+
+def _anonymous(item: HeldDomain) -> str:
+    """What holds an ID when no process is named: a port, a participant's UDP ports."""
+    if item.via == "port":
+        return "port taken"
+    if item.via == "participant":
+        return f"DDS participant on UDP {_ports(item.ports)}"
+    return item.via
+
+
+def _ports(ports: tuple[int, ...], limit: int = 4) -> str:
+    shown = ", ".join(str(port) for port in ports[:limit])
+    return shown + (f" and {len(ports) - limit} more" if len(ports) > limit else "")
+
+
+def anonymous_holder(item: HeldDomain) -> str:
+    """The line ``status`` shows for an ID no holder record or process names."""
+    if item.via == "lock":
+        return "held (no holder record)"
+    if item.via == "participant":
+        return f"a DDS participant (UDP ports {_ports(item.ports)}) outside any runner"
+    return "port 32768+ID taken (upstream domain_coordinator or another program)"

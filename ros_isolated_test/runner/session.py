@@ -161,12 +161,15 @@ def _guarded(
     console: BinaryIO,
     guard: _Guard,
 ) -> int:
+    if policy.isolate and config.notes:
+        # Recorded before the reservation: a run that gets no ID says it too.
+        result.properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
     try:
         with isolation(policy, config, request.command, capture.note) as held:
             domain_id = None if held is None else held.domain_id
             if domain_id is not None:
                 capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
-            lines, properties = summary(policy, domain_id)
+            lines, properties = summary(policy, domain_id, config)
             for line in lines:
                 capture.note(line)
             result.properties.update(properties)
@@ -210,10 +213,18 @@ def _guarded(
     return code
 
 
-def summary(policy: environment.Policy, domain_id: int | None) -> tuple[list[str], dict[str, str]]:
+#: The suite property holding the settings' notes (IDs left out of the default pool, ...).
+SETTINGS_NOTES = "settings_notes"
+NOTES_SEPARATOR = " | "
+
+
+def summary(
+    policy: environment.Policy, domain_id: int | None, config: settings.Settings | None = None
+) -> tuple[list[str], dict[str, str]]:
     """What a run on ``domain_id`` (None: isolation disabled) says first, and its properties.
 
-    One wording for the runner's output and the pytest plugin's header.
+    One wording for the runner's output and the pytest plugin's header. ``config``'s
+    notes concern the pool, so they are said only when an ID was handed out.
     """
     lines: list[str] = []
     properties: dict[str, str] = {}
@@ -223,6 +234,9 @@ def summary(policy: environment.Policy, domain_id: int | None) -> tuple[list[str
             lines.append(policy.discovery.describe())
             lines.extend(policy.discovery.warnings)
             properties.update(policy.discovery.properties())
+        if config is not None and config.notes:
+            lines.extend(config.notes)
+            properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
     else:
         properties["ros_domain_id"] = policy.env.get(environment.DOMAIN_VAR, "unset (0)")
         properties["isolation"] = "disabled"

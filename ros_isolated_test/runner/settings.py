@@ -14,7 +14,12 @@ import os
 from pathlib import Path
 
 from ros_isolated_test.domain_coordinator.lock_dir import LOCK_DIR_ENV, lock_dir_from_env
-from ros_isolated_test.domain_coordinator.pool import POOL_ENV, PoolSpecError, pool_from_env
+from ros_isolated_test.domain_coordinator.pool import (
+    LINUX_DEFAULT_PORT_RANGE,
+    POOL_ENV,
+    PoolSpecError,
+    choose_pool,
+)
 from ros_isolated_test.runner import discovery
 
 TYPE_CHECKING = False  # no typing import on a test's path
@@ -50,7 +55,14 @@ class SettingsError(ValueError):
 class Settings:
     """What the runner was configured to do, whoever configured it."""
 
-    __slots__ = ("discovery_range", "isolation_disabled", "lock_dir", "pool", "wait_timeout")
+    __slots__ = (
+        "discovery_range",
+        "isolation_disabled",
+        "lock_dir",
+        "notes",
+        "pool",
+        "wait_timeout",
+    )
 
     def __init__(
         self,
@@ -60,6 +72,7 @@ class Settings:
         wait_timeout: float = DEFAULT_WAIT_TIMEOUT,
         discovery_range: str | None = None,
         isolation_disabled: bool = False,
+        notes: tuple[str, ...] = (),
     ) -> None:
         #: The shared lock directory (ROS_ISOLATED_TEST_LOCK_DIR).
         self.lock_dir = lock_dir
@@ -71,6 +84,9 @@ class Settings:
         self.discovery_range = discovery_range
         #: DISABLE_ROS_ISOLATION in the runner's own environment.
         self.isolation_disabled = isolation_disabled
+        #: One line each, said before the test runs and kept in the result file: what the
+        #: settings changed on their own (IDs left out of the default pool) or warn about.
+        self.notes = notes
 
     def __repr__(self) -> str:
         return (
@@ -104,10 +120,12 @@ def read(
     *,
     wait_timeout: float | None = None,
     discovery_range: str | None = None,
+    port_range: tuple[int, int] | None = None,
 ) -> Settings:
     """The settings from options (None: not given) and ``environ`` (default: os.environ).
 
-    Raises :class:`SettingsError` for a value that cannot be used.
+    ``port_range``: the ephemeral port range the pool must keep clear of; None reads this
+    network namespace's. Raises :class:`SettingsError` for a value that cannot be used.
     """
     environ = os.environ if environ is None else environ
     if wait_timeout is None:
@@ -126,7 +144,7 @@ def read(
         except discovery.DiscoveryError as error:
             raise SettingsError(str(error)) from None
     try:
-        pool = pool_from_env(environ)
+        pool, notes = choose_pool(environ, port_range)
     except PoolSpecError as error:
         raise SettingsError(str(error)) from None
     return Settings(
@@ -135,6 +153,7 @@ def read(
         wait_timeout=wait_timeout,
         discovery_range=discovery_range,
         isolation_disabled=disables_isolation(environ.get(DISABLE_VAR)),
+        notes=notes,
     )
 
 
@@ -142,6 +161,6 @@ def defaults() -> Settings:
     """The built-in settings, no variable read: for a request that never runs.
 
     A usage error's result file needs a request, and must not fail on (or report) a
-    bad variable the user never got to.
+    bad variable the user never got to, nor on this host's port range.
     """
-    return read({})
+    return read({}, port_range=LINUX_DEFAULT_PORT_RANGE)

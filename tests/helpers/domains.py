@@ -2,7 +2,7 @@
 
 Ports 32768+ID and the processes' environments are machine-wide, and other runners hold
 IDs in the default lock directory, so a test never assumes an ID is free: it takes IDs
-whose lock, port and environment are all unused now, from 215-232 where it can (outside
+whose lock, port, environment and DDS ports are all unused now, from 215-232 where it can (outside
 the default pool and upstream's 1-100, where other runs on this machine rarely are).
 """
 
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import pytest
 
-from ros_isolated_test.domain_coordinator import squatters
+from ros_isolated_test.domain_coordinator import participants, squatters
 from ros_isolated_test.domain_coordinator.lock_dir import lock_dir_from_env
 from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
 from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
@@ -23,7 +23,11 @@ HIGH_IDS = range(215, HIGHEST_VALID_ID + 1)
 
 
 def in_use(domain_id: int, squatted: set[int]) -> bool:
-    """Held by a runner (default or current lock dir), its port bound, or squatted."""
+    """Held by a runner (default or current lock dir), its port bound, or squatted.
+
+    ``squatted`` also holds the IDs a DDS participant is bound to (the coordinator
+    refuses those too).
+    """
     if domain_id in squatted or port_is_taken(domain_id):
         return True
     lock_dirs = {lock_dir_from_env({}), lock_dir_from_env()}
@@ -43,7 +47,7 @@ def free_ids(count: int, candidates: Sequence[int] = HIGH_IDS) -> list[int]:
         *random.sample(list(candidates), len(candidates)),
         *random.sample(others, len(others)),
     ]
-    squatted = set(squatters.scan(set(everything)))
+    squatted = set(squatters.scan(set(everything))) | set(participants.bound_domains())
     free: list[int] = []
     for domain_id in everything:
         if not in_use(domain_id, squatted):
