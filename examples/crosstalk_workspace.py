@@ -3,7 +3,8 @@
 examples/demo.py and tests/test_example_package.py both drive colcon through these helpers,
 so the demo and its test check exactly the same thing. Everything is derived from the
 interpreter running this module (a virtualenv with ROS 2, ament_cmake and colcon), so no
-ROS setup script has to be sourced first.
+ROS setup script has to be sourced first; a :class:`Toolchain` names another such venv (the
+test suite builds the package with Jazzy's and with Kilted's).
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 PACKAGE = "crosstalk_demo"
@@ -33,7 +35,24 @@ class WorkspaceError(RuntimeError):
     """A colcon step failed in a way that leaves nothing to report on (not a test failure)."""
 
 
-def colcon_env() -> dict[str, str]:
+@dataclass(frozen=True)
+class Toolchain:
+    """The venv that builds and tests the package: its Python and the environment to start from.
+
+    The default is the interpreter running this module and this process's environment, read
+    at call time. Another distro's venv needs its Python, its prefix, and a base environment
+    as its sourced setup would give (its libraries and AMENT_PREFIX_PATH, none of ours).
+    """
+
+    python: str = sys.executable
+    prefix: str = sys.prefix
+    base_env: Mapping[str, str] | None = field(default=None, compare=False)
+
+
+THIS_PYTHON = Toolchain()
+
+
+def colcon_env(toolchain: Toolchain = THIS_PYTHON) -> dict[str, str]:
     """Return the environment for colcon, CMake, ctest and the tests.
 
     CMake finds ament_cmake under the interpreter's prefix (share/ament_cmake/cmake) only
@@ -43,8 +62,8 @@ def colcon_env() -> dict[str, str]:
     one, and the control must run on the default domain like an unconfigured machine.
     DISABLE_ROS_ISOLATION goes too, or the isolated run would not isolate.
     """
-    env = dict(os.environ)
-    prefix = sys.prefix
+    env = dict(os.environ if toolchain.base_env is None else toolchain.base_env)
+    prefix = toolchain.prefix
     env["PATH"] = os.pathsep.join(p for p in (str(Path(prefix) / "bin"), env.get("PATH")) if p)
     env["CMAKE_PREFIX_PATH"] = os.pathsep.join(
         p for p in (prefix, env.get("CMAKE_PREFIX_PATH")) if p
@@ -54,12 +73,12 @@ def colcon_env() -> dict[str, str]:
     return env
 
 
-def isolated_runner_problem() -> str | None:
+def isolated_runner_problem(toolchain: Toolchain = THIS_PYTHON) -> str | None:
     """Say why `ros-isolated-test runner-path` cannot give a runner, or None if it can."""
     try:
         proc = subprocess.run(
             ["ros-isolated-test", "runner-path"],
-            env=colcon_env(),
+            env=colcon_env(toolchain),
             capture_output=True,
             text=True,
             timeout=60,
@@ -132,8 +151,13 @@ class Run:
         return all(c.record is not None and c.record.passed for c in self.cases)
 
 
-def _colcon(args: list[str], cwd: Path, extra_env: dict[str, str] | None = None) -> tuple[int, str]:
-    env = colcon_env()
+def _colcon(
+    args: list[str],
+    cwd: Path,
+    extra_env: dict[str, str] | None = None,
+    toolchain: Toolchain = THIS_PYTHON,
+) -> tuple[int, str]:
+    env = colcon_env(toolchain)
     env.update(extra_env or {})
     proc = subprocess.run(
         ["colcon", *args],
@@ -155,7 +179,7 @@ def _common(base: Path) -> list[str]:
     ]  # fmt: skip
 
 
-def build(workspace: Path, runner: str) -> Path:
+def build(workspace: Path, runner: str, toolchain: Toolchain = THIS_PYTHON) -> Path:
     """Configure and build the package for one runner in <workspace>/<runner>; return that dir.
 
     Each runner gets its own build dir because the runner is baked into CTestTestfile.cmake
@@ -165,10 +189,11 @@ def build(workspace: Path, runner: str) -> Path:
         raise ValueError(f"runner must be one of {RUNNERS}, not {runner!r}")
     base = workspace / runner
     base.mkdir(parents=True, exist_ok=True)
-    cmake_args = [f"-DCROSSTALK_RUNNER={runner}", f"-DPython3_EXECUTABLE={sys.executable}"]
+    cmake_args = [f"-DCROSSTALK_RUNNER={runner}", f"-DPython3_EXECUTABLE={toolchain.python}"]
     code, output = _colcon(
         ["--log-base", str(base / "log"), "build", *_common(base), "--cmake-args", *cmake_args],
         cwd=workspace,
+        toolchain=toolchain,
     )
     if code != 0:
         raise WorkspaceError(f"colcon build with CROSSTALK_RUNNER={runner} failed:\n{output}")
@@ -202,12 +227,13 @@ def read_records(record_dir: Path) -> dict[str, Record]:
     return records
 
 
-def result_summary(base: Path) -> ResultSummary:
+def result_summary(base: Path, toolchain: Toolchain = THIS_PYTHON) -> ResultSummary:
     """Run `colcon test-result --all` on the build dir and parse its totals line."""
     code, output = _colcon(
         ["--log-base", str(base / "log"), "test-result", "--test-result-base",
          str(base / "build"), "--all"],
         cwd=base,
+        toolchain=toolchain,
     )  # fmt: skip
     matches = list(_SUMMARY.finditer(output))
     if not matches:
@@ -217,10 +243,12 @@ def result_summary(base: Path) -> ResultSummary:
     return ResultSummary(match[0], tests, errors, failures, skipped, code)
 
 
-def run(workspace: Path, runner: str, jobs: int = DEFAULT_JOBS) -> Run:
+def run(
+    workspace: Path, runner: str, jobs: int = DEFAULT_JOBS, toolchain: Toolchain = THIS_PYTHON
+) -> Run:
     """Build, run all tests at once with `colcon test --ctest-args -jN`, and collect results."""
     started = time.monotonic()
-    base = build(workspace, runner)
+    base = build(workspace, runner, toolchain)
     built = time.monotonic()
     record_dir = base / "records"
     record_dir.mkdir(exist_ok=True)
@@ -230,6 +258,7 @@ def run(workspace: Path, runner: str, jobs: int = DEFAULT_JOBS) -> Run:
         ["--log-base", str(base / "log"), "test", *_common(base), "--ctest-args", f"-j{jobs}"],
         cwd=workspace,
         extra_env={"CROSSTALK_RECORD_DIR": str(record_dir)},
+        toolchain=toolchain,
     )
     tested = time.monotonic()
     runner_path, tokens = registered_tests(base)
@@ -243,5 +272,5 @@ def run(workspace: Path, runner: str, jobs: int = DEFAULT_JOBS) -> Run:
         test_seconds=tested - built,
         test_output=test_output,
         cases=cases,
-        result=result_summary(base),
+        result=result_summary(base, toolchain),
     )

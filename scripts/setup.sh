@@ -2,7 +2,7 @@
 # Installs everything the demo and the test suite need: system build tools (cmake, a C++
 # compiler, googletest, node) from Debian when missing, xunit-viewer from npm into
 # node_modules, then ros-isolated-test with real ROS 2 Jazzy, ament_cmake and colcon
-# from PyPI into .venv.
+# from PyPI into .venv, and with ROS 2 Kilted into .venv-kilted.
 # Safe to run again: it only installs again when pyproject.toml changed.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -64,7 +64,29 @@ if [[ ! -f $stamp ]]; then
   touch "$stamp"
 fi
 
+# ROS 2 Kilted beside Jazzy, in a venv of its own (the wheels of two distros cannot share
+# one): the Kilted tier of the test suite and the benchmarks against Kilted's runner use
+# it. ROS_ISOLATED_TEST_NO_KILTED=1 leaves it out (that tier then says it was skipped).
+kilted_stamp=.venv-kilted/.installed-$(sha256sum pyproject.toml | cut -c1-16)
+if [[ ${ROS_ISOLATED_TEST_NO_KILTED:-} != 1 && ! -f $kilted_stamp ]]; then
+  echo "setup: installing ros-isolated-test with ROS 2 Kilted into .venv-kilted (about a minute)"
+  [[ -x .venv-kilted/bin/python ]] || "$python" -m venv .venv-kilted
+  log=.venv-kilted/install.log
+  if ! { .venv-kilted/bin/python -m pip install -q --upgrade pip &&
+         .venv-kilted/bin/python -m pip install -q -e ".[kilted]"; } >"$log" 2>&1; then
+    grep -v '^WARNING: Location' "$log" >&2
+    echo "setup: pip install failed (full log: $log)" >&2
+    exit 1
+  fi
+  .venv-kilted/bin/ros-isolated-test --help >/dev/null
+  rm -f .venv-kilted/.installed-*
+  touch "$kilted_stamp"
+fi
+
 # An editable install does not copy data files: CMake's find_package(ros_isolated_test)
 # looks for the package config under .venv/share, next to .venv/bin on PATH.
-mkdir -p .venv/share/ros_isolated_test
-[[ -e .venv/share/ros_isolated_test/cmake ]] || ln -s "$root/ros_isolated_test/cmake" .venv/share/ros_isolated_test/cmake
+for venv in .venv .venv-kilted; do
+  [[ -d $venv ]] || continue
+  mkdir -p "$venv/share/ros_isolated_test"
+  [[ -e $venv/share/ros_isolated_test/cmake ]] || ln -s "$root/ros_isolated_test/cmake" "$venv/share/ros_isolated_test/cmake"
+done

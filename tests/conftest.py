@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from helpers import busy_machine, capabilities
 from helpers.commands import BIN, CLI, HUNG, POLICY_VARS
+from helpers.distros import JAZZY, KILTED, Distro, Tools
 from helpers.domains import free_ids
 from helpers.processes import Children
 from helpers.workspace import CrosstalkBuilds
@@ -141,6 +142,41 @@ def crosstalk_builds(tmp_path_factory: pytest.TempPathFactory) -> CrosstalkBuild
     """
     capabilities.require(capabilities.COLCON)
     return CrosstalkBuilds(tmp_path_factory.mktemp("crosstalk_ws"))
+
+
+@pytest.fixture(
+    scope="module",
+    params=[
+        pytest.param(JAZZY, id="jazzy"),
+        pytest.param(KILTED, id="kilted", marks=capabilities.KILTED.mark),
+    ],
+)
+def distro(request: pytest.FixtureRequest) -> Distro:
+    """Each ROS 2 distro the suite supports: a test that asks for it runs on each.
+
+    Jazzy is the suite's own venv; Kilted is .venv-kilted (skipped, or failed in strict
+    mode, when scripts/setup.sh has not made it).
+    """
+    chosen: Distro = request.param
+    return chosen
+
+
+@pytest.fixture(scope="module")
+def tools(distro: Distro) -> Tools:
+    """How to run our CLI and RUNNER on ``distro`` (Jazzy's: the suite's own, unchanged)."""
+    return Tools.on(distro)
+
+
+@pytest.fixture(scope="module")
+def distro_runner_script(tools: Tools) -> str:
+    """The RUNNER as the distro's own ``ros-isolated-test runner-path`` prints it."""
+    return tools.runner_script()
+
+
+@pytest.fixture
+def distro_env(env: dict[str, str], tools: Tools) -> dict[str, str]:
+    """The ``env`` fixture on the distro: as its sourced setup would give, same lock dir."""
+    return tools.env(env)
 
 
 @pytest.fixture

@@ -2,7 +2,10 @@
 
 The contract is docs/ament-runner-contract.md: what ctest passes to a RUNNER, what
 run_test.py does with each argument, the result file and exit code we keep, and where we
-differ on purpose. Every test runs real processes against its own lock dir.
+differ on purpose. Every test runs real processes against its own lock dir. The core of
+the contract (a pass, a failure, the result file, the exit code, the domain) runs on each
+supported distro through the ``tools`` fixture: on Jazzy as ever, on Kilted with
+.venv-kilted's interpreter and its installed runner.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from pathlib import Path
 
 import pytest
 from helpers.commands import ament, run_runner
+from helpers.distros import Tools
 from helpers.results import DOMAIN_LINE, NO_RESULT, domain_of, load_result, own_result
 from lxml import etree
 
@@ -31,10 +35,17 @@ def sh(script: str, *args: str) -> list[str]:
 
 
 def test_missing_result_folder_is_created(
-    runner_script: str, env: dict[str, str], tmp_path: Path
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path
 ) -> None:
     result = tmp_path / "build" / "pkg" / "test_results" / "pkg" / "t.xml"
-    proc = ament(runner_script, result, ["true"], env, "--generate-result-on-success", cwd=tmp_path)
+    proc = tools.ament(
+        distro_runner_script,
+        result,
+        ["true"],
+        distro_env,
+        "--generate-result-on-success",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert load_result(result).only.outcome == "passed"
 
@@ -432,10 +443,17 @@ def test_undecodable_output_in_the_runner_console_is_passed_through(
 
 
 def test_zero_with_generate_result_on_success_writes_passed_result(
-    runner_script: str, env: dict[str, str], tmp_path: Path
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path
 ) -> None:
     result = tmp_path / "pkg" / "t.xml"
-    proc = ament(runner_script, result, ["true"], env, "--generate-result-on-success", cwd=tmp_path)
+    proc = tools.ament(
+        distro_runner_script,
+        result,
+        ["true"],
+        distro_env,
+        "--generate-result-on-success",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     summary = load_result(result)
     assert summary.only.outcome == "passed"
@@ -443,14 +461,14 @@ def test_zero_with_generate_result_on_success_writes_passed_result(
 
 
 def test_nonzero_without_result_file_writes_failure_with_the_output(
-    runner_script: str, env: dict[str, str], tmp_path: Path
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path
 ) -> None:
     result = tmp_path / "pkg" / "t.xml"
-    proc = ament(
-        runner_script,
+    proc = tools.ament(
+        distro_runner_script,
         result,
         sh("echo line-one-of-output; echo line-two >&2; exit 5"),
-        env,
+        distro_env,
         "--generate-result-on-success",
         cwd=tmp_path,
     )
@@ -506,17 +524,21 @@ def test_zero_when_the_test_deleted_the_result_file_fails(
 
 @pytest.mark.parametrize("exit_code", [0, 4])
 def test_own_result_file_with_failures_fails(
-    runner_script: str, env: dict[str, str], tmp_path: Path, exit_code: int
+    tools: Tools,
+    distro_runner_script: str,
+    distro_env: dict[str, str],
+    tmp_path: Path,
+    exit_code: int,
 ) -> None:
     result = tmp_path / "pkg" / "t.xml"
     written = own_result(
         tmp_path / "own.xml", [("good", "passed", ""), ("bad", "failure", "assert 1 == 2")]
     )
-    proc = ament(
-        runner_script,
+    proc = tools.ament(
+        distro_runner_script,
         result,
         sh(f'cp own.xml "$1"; exit {exit_code}', str(result)),
-        env,
+        distro_env,
         cwd=tmp_path,
     )
     assert proc.returncode == (exit_code or 1), proc.stdout + proc.stderr
@@ -690,14 +712,14 @@ def test_help_is_printed_and_nothing_runs(
 
 
 def test_domain_line_comes_first_and_the_command_sees_that_domain(
-    runner_script: str, env: dict[str, str], tmp_path: Path
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path
 ) -> None:
     result = tmp_path / "pkg" / "t.xml"
-    proc = ament(
-        runner_script,
+    proc = tools.ament(
+        distro_runner_script,
         result,
         sh('echo "seen=$ROS_DOMAIN_ID ppid=$PPID"; ros-isolated-test status --json > status.json'),
-        env,
+        distro_env,
         "--generate-result-on-success",
         cwd=tmp_path,
     )
@@ -712,6 +734,29 @@ def test_domain_line_comes_first_and_the_command_sees_that_domain(
     assert held[domain]["via"] == "lock", "the runner must hold the ID through its lock"
     assert held[domain]["pid"] == int(match.group(2)), "held by the runner itself"
     assert load_result(result).properties["ros_domain_id"] == str(domain)
+
+
+def test_the_test_imports_rclpy_from_the_distros_venv(
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path
+) -> None:
+    """The tier is the distro it says: its test loads that venv's rclpy and sees its ROS_DISTRO.
+
+    Jazzy's environment is the suite's own, which need not name a distro.
+    """
+    probe = "import os, rclpy; print('rclpy', rclpy.__file__, os.environ.get('ROS_DISTRO'))"
+    result = tmp_path / "pkg" / "t.xml"
+    command = [tools.python, "-c", probe]
+    proc = tools.ament(
+        distro_runner_script, result, command, distro_env, "--generate-result-on-success",
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    match = re.search(r"^rclpy (\S+) (\S+)$", proc.stdout, re.MULTILINE)
+    assert match, proc.stdout
+    assert tools.distro.owns(match.group(1)), f"rclpy from outside {tools.distro}: {match[1]}"
+    if tools.distro.name != "jazzy":
+        assert match.group(2) == tools.distro.name, proc.stdout
+    assert load_result(result).only.outcome == "passed"
 
 
 def test_domain_is_free_again_after_the_run(

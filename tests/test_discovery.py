@@ -5,7 +5,9 @@ runner confines discovery to localhost (ROS_AUTOMATIC_DISCOVERY_RANGE, or Humble
 ROS_LOCALHOST_ONLY). Every case here runs a real test command that dumps its own
 environment, through the shell ``run`` and through the ctest RUNNER, and checks the
 console line and the result file's properties that report the decision.
-tests/test_network_isolation.py shows the same decision stopping real crosstalk.
+tests/test_network_isolation.py shows the same decision stopping real crosstalk. The
+default and the override also run on each supported distro (the ``tools`` fixture): on
+Kilted, with ROS_DISTRO=kilted, the range still goes in ROS_AUTOMATIC_DISCOVERY_RANGE.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import TYPE_CHECKING
 import pytest
 from helpers import capabilities
 from helpers.commands import run_cli, run_runner
+from helpers.distros import Tools
 from helpers.results import ResultSummary, load_result
 from helpers.workspace import CrosstalkBuilds, crosstalk_workspace
 
@@ -93,21 +96,28 @@ def invoke(
     tmp_path: Path,
     option: str | None = None,
     ament_env: Sequence[str] = (),
+    tools: Tools | None = None,
 ) -> Outcome:
-    """Run the dumping test through ``run`` (with ``--discovery-range option``) or the RUNNER."""
+    """Run the dumping test through ``run`` (with ``--discovery-range option``) or the RUNNER.
+
+    With ``tools``, the CLI, the RUNNER and the test are that distro's; else the suite's own.
+    """
     seen_file = tmp_path / "seen.json"
     result = tmp_path / "out" / "pkg" / "t.xml"
-    command = [sys.executable, "-c", DUMP, str(seen_file)]
+    python = sys.executable if tools is None else tools.python
+    command = [python, "-c", DUMP, str(seen_file)]
     if mode == "shell":
         assert not ament_env, "--env is the RUNNER's"
         chosen = ["--discovery-range", option] if option is not None else []
         args = ["run", "--junit-xml", str(result), *chosen, "--", *command]
-        proc = run_cli(args, env, cwd=tmp_path)
+        cli = run_cli if tools is None else tools.run_cli
+        proc = cli(args, env, cwd=tmp_path)
     else:
         assert option is None, "the RUNNER takes run_test.py's arguments; use the variable"
         extra = ["--env", *ament_env] if ament_env else []
         args = [str(result), "--package-name", "pkg", "--generate-result-on-success", *extra]
-        proc = run_runner(runner_script, [*args, "--command", *command], env, cwd=tmp_path)
+        runner = run_runner if tools is None else tools.run_runner
+        proc = runner(runner_script, [*args, "--command", *command], env, cwd=tmp_path)
     seen = json.loads(seen_file.read_text()) if seen_file.exists() else None
     return Outcome(proc, seen, result)
 
@@ -129,10 +139,13 @@ def assert_reported(outcome: Outcome, expected_range: str, source_has: str) -> d
 
 @pytest.mark.parametrize("mode", MODES)
 def test_default_confines_discovery_to_this_machine(
-    runner_script: str, denv: dict[str, str], tmp_path: Path, mode: str
+    tools: Tools, distro_runner_script: str, denv: dict[str, str], tmp_path: Path, mode: str
 ) -> None:
-    outcome = invoke(mode, runner_script, denv, tmp_path)
+    denv = tools.env(denv)
+    outcome = invoke(mode, distro_runner_script, denv, tmp_path, tools=tools)
     seen = outcome.received
+    if tools.distro.name != "jazzy":  # Jazzy's environment is the suite's, as it always was
+        assert seen.get("ROS_DISTRO") == tools.distro.name, "the tier is not that distro"
     assert seen[RANGE] == "LOCALHOST"
     assert ONLY not in seen
     assert PEERS not in seen
@@ -238,14 +251,22 @@ OVERRIDES = [
 
 @pytest.mark.parametrize(("mode", "how", "value"), OVERRIDES)
 def test_override_wins_over_the_users_range_and_localhost_only(
-    runner_script: str, denv: dict[str, str], tmp_path: Path, mode: str, how: str, value: str
+    tools: Tools,
+    distro_runner_script: str,
+    denv: dict[str, str],
+    tmp_path: Path,
+    mode: str,
+    how: str,
+    value: str,
 ) -> None:
+    denv = tools.env(denv)
     wanted = value.upper()
     denv[RANGE] = "SUBNET" if wanted == "LOCALHOST" else "LOCALHOST"
     denv[ONLY] = "1"  # would override any range: it has to go
     if how == "variable":
         denv[OVERRIDE] = value
-    outcome = invoke(mode, runner_script, denv, tmp_path, option=value if how == "option" else None)
+    option = value if how == "option" else None
+    outcome = invoke(mode, distro_runner_script, denv, tmp_path, option=option, tools=tools)
     seen = outcome.received
     assert seen[RANGE] == wanted
     assert ONLY not in seen, f"{ONLY}={seen[ONLY]} left in: it overrides {RANGE}"

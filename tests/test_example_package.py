@@ -4,7 +4,9 @@ Six rclpy tests publish on one topic at once (ctest -j6). Through our runner eac
 its own ROS_DOMAIN_ID and pass; through ament's plain run_test.py (the control) the same
 tests must fail, which is what shows the passes come from isolation and not from luck.
 The workspace helpers are the demo's own (examples/crosstalk_workspace.py), loaded by path;
-the package is built once per session (the ``crosstalk_builds`` fixture).
+the package is built once per session (the ``crosstalk_builds`` fixture). The whole module
+runs on each supported distro (the ``distro`` fixture): on Jazzy with the suite's own venv,
+on Kilted with .venv-kilted's colcon, CMake prefix, Python and installed runner.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 from helpers import capabilities
+from helpers.distros import Distro, Tools
 from helpers.workspace import CrosstalkBuilds
 
 if TYPE_CHECKING:  # for annotations only; at run time the module is loaded by path
@@ -24,13 +27,13 @@ pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
 
 
 @pytest.fixture(scope="module")
-def isolated_run(crosstalk_builds: CrosstalkBuilds) -> Run:
-    return crosstalk_builds.test("isolated")
+def isolated_run(crosstalk_builds: CrosstalkBuilds, distro: Distro) -> Run:
+    return crosstalk_builds.test("isolated", distro=distro)
 
 
 @pytest.fixture(scope="module")
-def plain_run(crosstalk_builds: CrosstalkBuilds) -> Run:
-    return crosstalk_builds.test("plain")
+def plain_run(crosstalk_builds: CrosstalkBuilds, distro: Distro) -> Run:
+    return crosstalk_builds.test("plain", distro=distro)
 
 
 def _records(run: Run) -> list[Record]:
@@ -84,3 +87,29 @@ def test_plain_colcon_test_result_reports_failures(plain_run: Run) -> None:
     result = plain_run.result
     assert result.returncode != 0, result.line
     assert result.failures + result.errors >= 4, result.line
+
+
+def _registered(run: Run, python: str, runner: str) -> int:
+    """How many tests ctest runs as ``<python> -u <runner> ... --command <python> ...``."""
+    text = (run.base / "build" / "crosstalk_demo" / "CTestTestfile.cmake").read_text()
+    return sum(
+        1
+        for line in text.splitlines()
+        if line.startswith("add_test(")
+        and f'"{python}" "-u" "{runner}" ' in line
+        and f'"--command" "{python}" ' in line
+    )
+
+
+def test_both_builds_run_on_the_distros_python_and_runners(
+    isolated_run: Run, plain_run: Run, tools: Tools, distro_runner_script: str
+) -> None:
+    """What ctest ran is the distro's own: its Python, our runner as its venv has it, its ament.
+
+    Without this the Kilted passes could come from Jazzy's interpreter or libraries.
+    """
+    assert isolated_run.runner_path == distro_runner_script
+    assert _registered(isolated_run, tools.python, distro_runner_script) == 6, tools
+    plain = tools.distro.prefix / "share" / "ament_cmake_test" / "cmake" / "run_test.py"
+    assert plain_run.runner_path == str(plain)
+    assert _registered(plain_run, tools.python, str(plain)) == 6, tools

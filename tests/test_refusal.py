@@ -2,6 +2,8 @@
 
 Upstream silently runs on a preset ID; we refuse, because an exported ID turns a parallel
 run into crosstalk nobody notices. DISABLE_ROS_ISOLATION=1 is the documented way out.
+The refusal runs on each supported distro (the ``tools`` fixture); it matters most on
+Kilted, whose upstream runner silently replaces a preset ID instead.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from helpers.commands import run_cli, run_runner
+from helpers.distros import Tools
 from helpers.results import load_result
 
 ERROR_PREFIX = "ros-isolated-test: error: "
@@ -26,12 +29,17 @@ def invoke(
     command: Sequence[str],
     result: Path | None = None,
     runner_options: Sequence[str] = (),
+    tools: Tools | None = None,
 ) -> subprocess.CompletedProcess[str]:
-    """Run ``command`` through ``ros-isolated-test run`` or the RUNNER script."""
+    """Run ``command`` through ``ros-isolated-test run`` or the RUNNER script.
+
+    With ``tools``, the CLI and the RUNNER's interpreter are that distro's; else the suite's.
+    """
     if mode == "shell":
         assert not runner_options
         junit = ["--junit-xml", str(result)] if result is not None else []
-        return run_cli(["run", *junit, "--", *command], env, cwd=cwd)
+        cli = run_cli if tools is None else tools.run_cli
+        return cli(["run", *junit, "--", *command], env, cwd=cwd)
     result = result if result is not None else cwd / "pkg" / "t.xml"
     args = [
         str(result),
@@ -42,7 +50,8 @@ def invoke(
         "--command",
         *command,
     ]
-    return run_runner(runner_script, args, env, cwd=cwd)
+    runner = run_runner if tools is None else tools.run_runner
+    return runner(runner_script, args, env, cwd=cwd)
 
 
 def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
@@ -55,10 +64,16 @@ def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("value", ["5", ""], ids=["set", "empty"])
 def test_preset_domain_id_is_refused_and_nothing_runs(
-    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str, value: str
+    tools: Tools,
+    distro_runner_script: str,
+    distro_env: dict[str, str],
+    tmp_path: Path,
+    mode: str,
+    value: str,
 ) -> None:
+    env = distro_env
     env["ROS_DOMAIN_ID"] = value
-    proc = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    proc = invoke(mode, distro_runner_script, env, tmp_path, ["touch", "ran"], tools=tools)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists(), "a refused test must not run"
     assert "Running with ROS_DOMAIN_ID" not in proc.stdout
@@ -73,11 +88,14 @@ def test_preset_domain_id_is_refused_and_nothing_runs(
 
 @pytest.mark.parametrize("mode", MODES)
 def test_refusal_is_recorded_in_the_result_file_as_a_failed_case(
-    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path, mode: str
 ) -> None:
+    env = distro_env
     env["ROS_DOMAIN_ID"] = "17"
     result = tmp_path / "out" / "pkg" / "t.xml"
-    proc = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"], result=result)
+    proc = invoke(
+        mode, distro_runner_script, env, tmp_path, ["touch", "ran"], result=result, tools=tools
+    )
     assert proc.returncode == 2
     assert not (tmp_path / "ran").exists()
     message = the_error_line(proc).removeprefix(ERROR_PREFIX)

@@ -274,6 +274,13 @@ def _upstream_runner() -> str | None:
     )
 
 
+def _kilted() -> str | None:
+    """ROS 2 Kilted in .venv-kilted, whose Python imports rclpy (see helpers/distros.py)."""
+    from helpers.distros import KILTED
+
+    return KILTED.missing
+
+
 def _ctest() -> str | None:
     tools = [tool for tool in ("cmake", "ctest") if shutil.which(tool) is None]
     if tools:
@@ -304,3 +311,5 @@ FREE_DISK = Capability("free-disk", _free_disk)
 UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
 #: cmake and ctest, to run a registered test under ctest's TIMEOUT.
 CTEST = Capability("ctest", _ctest)
+#: ROS 2 Kilted's venv (.venv-kilted, made by scripts/setup.sh), for the Kilted tier.
+KILTED = Capability("kilted", _kilted)
