@@ -61,7 +61,8 @@ def _busy_machine(
     """Every test runs on a machine that runs other ROS work: real holders of real IDs.
 
     Runners in the default lock directory on the lowest free IDs, upstream's port
-    coordinator, and a process with ROS_DOMAIN_ID=7 (see helpers/busy_machine.py), for
+    coordinator, a process with ROS_DOMAIN_ID=7 and an rclpy node on an ID its code
+    chose (see helpers/busy_machine.py), for
     the whole session: a test that assumes an ID is free, or the machine empty, fails.
     """
     if os.environ.get(busy_machine.QUIET_ENV) == "1" and not _strict(request.config):

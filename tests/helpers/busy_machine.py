@@ -1,8 +1,9 @@
 """The scene of a machine running other ROS work, held by real processes for a session.
 
 Tests must pass on a machine where other runners hold IDs in the default lock directory,
-a shell exported ``ROS_DOMAIN_ID=7`` and upstream's ``domain_coordinator`` binds its port:
-the coordinator's port guard and squatter scan are machine-wide, as they must be. So the
+a shell exported ``ROS_DOMAIN_ID=7``, upstream's ``domain_coordinator`` binds its port and
+a ROS node runs on an ID its code chose: the coordinator's port guard and participant
+check are machine-wide, as they must be. So the
 suite runs with such a scene in place, on the lowest IDs, which tests are most likely to
 assume free.
 
@@ -13,6 +14,7 @@ however it ends (even SIGKILL), the pipe closes and the scene goes away by itsel
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import os
 import signal
 import subprocess
@@ -21,7 +23,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import squatters
+from ros_isolated_test.domain_coordinator import participants, squatters
 from ros_isolated_test.domain_coordinator.lock_dir import lock_dir_from_env
 from ros_isolated_test.domain_coordinator.pool import DEFAULT_SPEC, parse_pool
 from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
@@ -44,6 +46,20 @@ with domain_coordinator.domain_id() as domain_id:
     sys.stdin.read()
 """
 
+#: A ROS node on the domain its code chose (argv[1]), no ROS_DOMAIN_ID in its environment.
+PARTICIPANT_SCRIPT = """
+import sys
+import rclpy
+from rclpy.context import Context
+from rclpy.signals import SignalHandlerOptions
+context = Context()
+rclpy.init(args=[], context=context, domain_id=int(sys.argv[1]),
+           signal_handler_options=SignalHandlerOptions.NO)
+node = rclpy.create_node("busy_machine_participant", context=context)
+print(sys.argv[1], flush=True)
+sys.stdin.read()
+"""
+
 
 def clean_environment(bin_dir: Path) -> dict[str, str]:
     """What a fresh login would have: no ROS_* or ros-isolated-test settings at all."""
@@ -57,7 +73,7 @@ def in_use(domain_ids: Iterable[int]) -> set[int]:
     """The IDs that a runner using the default lock directory would find taken now."""
     wanted = set(domain_ids)
     lock_dir = lock_dir_from_env({})
-    taken = set(squatters.scan(wanted))
+    taken = set(squatters.scan(wanted)) | (set(participants.bound_domains()) & wanted)
     for domain_id in wanted - taken:
         if port_is_taken(domain_id) or (lock_dir.is_dir() and probe_lock(lock_dir, domain_id)):
             taken.add(domain_id)
@@ -180,6 +196,17 @@ class Scene:
             )
         )
 
+    def start_participant(self, domain_id: int) -> None:
+        """A real rclpy node on ``domain_id``, chosen in its code: only its UDP ports show it."""
+        env = clean_environment(self.bin_dir)
+        process = self._start(
+            "participant", [sys.executable, "-c", PARTICIPANT_SCRIPT, str(domain_id)], env
+        )
+        self._first_line("participant", process)
+        self.held.append(
+            Held(f"rclpy node, its code chose {domain_id}", "participant", domain_id, process)
+        )
+
     def _stop(self, process: subprocess.Popen[bytes]) -> None:
         """Close its pipe (it exits by itself), else SIGTERM, then SIGKILL, its group.
 
@@ -218,7 +245,7 @@ class Scene:
 
 
 def build(bin_dir: Path, workdir: Path) -> Scene:
-    """Start the scene: runners on the lowest free IDs, upstream, a squatter on 7.
+    """Start the scene: runners on the lowest free IDs, upstream, a squatter on 7, a node.
 
     On any failure, or an interrupt, whatever was started is stopped before raising.
     """
@@ -238,6 +265,10 @@ def build(bin_dir: Path, workdir: Path) -> Scene:
         scene.start_upstream()
         if SQUATTED_ID not in in_use([SQUATTED_ID]):
             scene.start_squatter(SQUATTED_ID)
+        if importlib.util.find_spec("rclpy") is not None:
+            taken = {held.domain_id for held in scene.held} | {SQUATTED_ID}
+            free = [i for i in pool if i not in taken and i not in in_use([i])]
+            scene.start_participant(free[0])
         scene.check()
     except BaseException:
         scene.stop()
