@@ -289,17 +289,17 @@ def status(as_json: bool) -> None:
 def _print_held(held: list[HeldDomain]) -> None:
     from ros_isolated_test.domain_coordinator.status import anonymous_holder
 
-    click.echo(f"{'ID':>3}  {'HELD BY':<8} {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
+    click.echo(f"{'ID':>3}  {'HELD BY':<11} {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
     kinds = {"lock": "runner", "port": "port", "environment": "squatter"}
     for item in held:
         kind = kinds.get(item.via, item.via)
         if item.holder is None:
             who = anonymous_holder(item)
-            click.echo(f"{item.domain_id:>3}  {kind:<8} {'-':>7}  {'-':<10} {'-':<19}  {who}")
+            click.echo(f"{item.domain_id:>3}  {kind:<11} {'-':>7}  {'-':<10} {'-':<19}  {who}")
             continue
         holder = item.holder
         click.echo(
-            f"{item.domain_id:>3}  {kind:<8} {holder.pid:>7}  {holder.user:<10.10} "
+            f"{item.domain_id:>3}  {kind:<11} {holder.pid:>7}  {holder.user:<10.10} "
             f"{holder.started_iso:<19}  {holder.command}"
         )
 

@@ -159,10 +159,11 @@ def crowd(tmp_path: Path, env: dict[str, str], lock_dir: Path) -> Iterator[Crowd
 def _listed_pids(stdout: str) -> dict[int, str]:
     """PID -> HELD BY of every row of the ``status`` table (ID, HELD BY, PID, ...).
 
-    A "port" row has no PID ("-"): the port guard cannot tell who binds it.
+    A "port" or "participant" row has no PID ("-"): a bound port does not say who binds it.
     """
     rows = [line.split() for line in stdout.splitlines()[1:] if line.strip()]
-    assert all(len(row) >= 6 and (row[2].isdigit() or row[1] == "port") for row in rows), stdout
+    anonymous = ("port", "participant")
+    assert all(len(row) >= 6 and (row[2].isdigit() or row[1] in anonymous) for row in rows), stdout
     return {int(row[2]): row[1] for row in rows if row[2].isdigit()}
 
 
