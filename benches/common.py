@@ -1,12 +1,15 @@
-"""What every benchmark shares: the two runners, one environment, timing, statistics, tables.
+"""What every benchmark shares: the runners, their environments, timing, statistics, tables.
 
-Both runners are always started the same way, by the same interpreter (the one running
-the benchmarks), with the same environment, so that the only difference measured is the
-runner itself. Everything a run leaves behind goes into one temporary directory.
+Runners are compared in pairs that share an interpreter and an environment, so that the
+only difference measured is the runner itself: ours against Jazzy's upstream under the
+Jazzy venv (the one running the benchmarks), and ours against Kilted's upstream under
+the Kilted venv (``.venv-kilted``, when scripts/setup.sh made it). Everything a run
+leaves behind goes into one temporary directory.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import statistics
@@ -19,9 +22,26 @@ from pathlib import Path
 from typing import IO
 
 REPO = Path(__file__).resolve().parent.parent
+#: Ours and Jazzy's upstream, both under the Jazzy venv (the interpreter running this).
 OURS = "ours"
 UPSTREAM = "upstream"
+#: Ours and Kilted's upstream, both under the Kilted venv.
+OURS_KILTED = "ours-kilted"
+KILTED = "kilted"
+#: The runners every benchmark that predates Kilted compares: the Jazzy pair.
 RUNNERS = (OURS, UPSTREAM)
+#: Like with like: each (ours, upstream) pair shares one interpreter and environment.
+PAIRS = ((OURS, UPSTREAM), (OURS_KILTED, KILTED))
+LABELS = {
+    OURS: "ours",
+    UPSTREAM: "Jazzy upstream",
+    OURS_KILTED: "ours (Kilted venv)",
+    KILTED: "Kilted upstream",
+}
+#: Where scripts/setup.sh puts the Kilted venv.
+KILTED_VENV = REPO / ".venv-kilted"
+#: Path lists a sourced ROS setup extends; entries of the other venv are taken out.
+_PATH_LISTS = ("PATH", "AMENT_PREFIX_PATH", "CMAKE_PREFIX_PATH", "LD_LIBRARY_PATH", "PYTHONPATH")
 #: Variables that change what either runner decides; the benchmarks set them explicitly.
 POLICY_VARS = (
     "ROS_DOMAIN_ID",
@@ -40,16 +60,71 @@ def upstream_runner_path() -> Path:
     return Path(sys.prefix) / "share" / "ament_cmake_ros" / "cmake" / "run_test_isolated.py"
 
 
-def ours_runner_path() -> Path:
-    """What ``ros-isolated-test runner-path`` prints, asked of this very interpreter."""
+def kilted_runner_path(prefix: Path = KILTED_VENV) -> Path:
+    """Kilted's run_test_isolated.py (it puts run_rmw_isolated before the command)."""
+    return prefix / "share" / "ament_cmake_ros" / "cmake" / "run_test_isolated.py"
+
+
+def ours_runner_path(python: str = sys.executable, env: Mapping[str, str] | None = None) -> Path:
+    """What ``ros-isolated-test runner-path`` prints, asked of ``python``."""
     proc = subprocess.run(
-        [sys.executable, "-m", "ros_isolated_test", "runner-path"],
+        [python, "-m", "ros_isolated_test", "runner-path"],
         capture_output=True,
         text=True,
         check=True,
         timeout=60,
+        env=None if env is None else dict(env),
     )
     return Path(proc.stdout.strip())
+
+
+def _within(path: str, roots: Sequence[Path]) -> bool:
+    """Whether ``path`` lies in one of ``roots`` (as written or with links resolved)."""
+    candidates = {Path(path)}
+    with contextlib.suppress(OSError):
+        candidates.add(Path(path).resolve())
+    return any(c == r or r in c.parents for c in candidates for r in roots)
+
+
+def venv_environment(base: Mapping[str, str], prefix: Path, other: Path) -> dict[str, str]:
+    """``base`` as a sourced setup of the venv ``prefix`` gives it, with no trace of ``other``.
+
+    The benchmarks run in the Jazzy venv, whose entries leak into every child's
+    environment; the wheels' start-up hook keeps LD_LIBRARY_PATH in a set (random
+    order), so a Kilted process could load Jazzy's libraries. The bootstrap mark is set,
+    as under a colcon of that venv: the library path is already right.
+    """
+    roots = [root for venv in (prefix, other) for root in {venv, venv.resolve()}]
+    env = dict(base)
+    for name in _PATH_LISTS:
+        kept = [p for p in base.get(name, "").split(os.pathsep) if p and not _within(p, roots)]
+        env[name] = os.pathsep.join(kept)
+    site = sorted((prefix / "lib").glob("python3.*/site-packages"))
+    libs = [str(d.resolve()) for s in site for d in sorted(s.glob("ros_*.libs")) if d.is_dir()]
+    own = {
+        "PATH": [str(prefix / "bin")],
+        "AMENT_PREFIX_PATH": [str(prefix)],
+        "CMAKE_PREFIX_PATH": [str(prefix)],
+        "LD_LIBRARY_PATH": [str(prefix / "lib"), *libs],
+        "PYTHONPATH": [],
+    }
+    for name, first in own.items():
+        joined = os.pathsep.join([*first, *filter(None, [env[name]])])
+        if joined:
+            env[name] = joined
+        else:
+            env.pop(name, None)
+    env[BOOTSTRAP_MARK] = "1"
+    return env
+
+
+def kilted_missing(prefix: Path = KILTED_VENV) -> str | None:
+    """Why the Kilted pair cannot run here, or None."""
+    if not (prefix / "bin" / "python").exists():
+        return f"no Kilted venv at {prefix.name} (scripts/setup.sh makes it)"
+    if not kilted_runner_path(prefix).is_file():
+        return f"{prefix.name} has no ament_cmake_ros runner (scripts/setup.sh installs it)"
+    return None
 
 
 def base_environment(work: Path) -> dict[str, str]:
@@ -69,13 +144,33 @@ def base_environment(work: Path) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class Context:
-    """Where the runners are, which environment they get, and how long to measure."""
+    """Where the runners are, which environment they get, and how long to measure.
+
+    ``python`` and ``env`` are the Jazzy venv's; ``pythons`` and ``envs`` give each
+    runner's own (the Kilted pair's are the Kilted venv's). Runners absent here (no
+    Kilted venv) are left out of every table, which says so.
+    """
 
     python: str
     runners: Mapping[str, Path]
     work: Path
     env: Mapping[str, str]
     quick: bool
+    pythons: Mapping[str, str] = field(default_factory=dict)
+    envs: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    missing: Mapping[str, str] = field(default_factory=dict)
+
+    def python_of(self, runner: str) -> str:
+        """The interpreter ``runner`` is started with (and every process of its side)."""
+        return self.pythons.get(runner, self.python)
+
+    def pairs(self) -> list[tuple[str, str]]:
+        """The (ours, upstream) pairs both of whose runners are here."""
+        return [pair for pair in PAIRS if all(r in self.runners for r in pair)]
+
+    def all_runners(self) -> tuple[str, ...]:
+        """Every runner present, pair by pair."""
+        return tuple(r for pair in self.pairs() for r in pair)
 
     def runner_command(
         self, runner: str, result: Path, command: Sequence[str], generate: bool = True
@@ -83,7 +178,7 @@ class Context:
         """Exactly what ctest runs: ``python -u RUNNER RESULT --package-name P ... --command``."""
         flags = ["--generate-result-on-success"] if generate else []
         return [
-            self.python,
+            self.python_of(runner),
             "-u",
             str(self.runners[runner]),
             str(result),
@@ -94,9 +189,9 @@ class Context:
             *command,
         ]
 
-    def environment(self, **extra: str) -> dict[str, str]:
-        """The shared environment plus ``extra``."""
-        env = dict(self.env)
+    def environment(self, runner: str = OURS, **extra: str) -> dict[str, str]:
+        """``runner``'s environment (its venv's; shared within a pair) plus ``extra``."""
+        env = dict(self.envs.get(runner, self.env))
         env.update(extra)
         return env
 
@@ -197,6 +292,25 @@ def ratio(ours: float, upstream: float) -> str:
         return "-"
     value = ours / upstream
     return f"{value:.2f}" if value < 10 else f"{value:.0f}"
+
+
+def verdict(met: bool | None) -> str:
+    """A target's state as the tables show it (None: not measured)."""
+    if met is None:
+        return "not measured"
+    return "met" if met else "**NOT met**"
+
+
+def at_most(value: float, limit: float) -> bool | None:
+    """``value <= limit``, or None when ``value`` is missing (NaN)."""
+    return None if math.isnan(value) else value <= limit
+
+
+def quotient(numerator: float, denominator: float) -> float:
+    """numerator / denominator, NaN when either is missing or the denominator is not > 0."""
+    if math.isnan(numerator) or math.isnan(denominator) or denominator <= 0:
+        return float("nan")
+    return numerator / denominator
 
 
 def startup_seconds(env: Mapping[str, str], reps: int, reexec: bool) -> float:

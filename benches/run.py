@@ -1,14 +1,17 @@
-"""Run every benchmark against both runners and print one table: ``python benches/run.py``.
+"""Run every benchmark against the upstream runners and print the tables: ``python benches/run.py``.
 
-Ours (``ros-isolated-test runner-path``) and upstream's (ament_cmake_ros's
-run_test_isolated.py with ``domain_coordinator``) are run side by side, interleaved, by
-the interpreter running this script, which must be the venv that has both (the ``ros``
-extra). Results are ratios of medians; absolute times are context only, as they move
-with the machine's load. ``--quick`` runs each benchmark briefly (CI runs it so the
-benchmarks never rot; it asserts no threshold). The output is Markdown: the README's
-performance section is one run's output pasted as it is.
+Ours (``ros-isolated-test runner-path``) runs side by side, interleaved, with Jazzy's
+upstream (ament_cmake_ros's run_test_isolated.py with ``domain_coordinator``) under the
+interpreter running this script, which must be the venv that has both (the ``ros``
+extra), and with Kilted's upstream (the same script name, putting rmw_test_fixture's
+``run_rmw_isolated`` before the command) under the Kilted venv (``.venv-kilted``, the
+``kilted`` extra), where scripts/setup.sh made one; like with like, each pair shares an
+interpreter and an environment. Results are ratios of medians; absolute times are
+context only, as they move with the machine's load. ``--quick`` runs each benchmark
+briefly (CI runs it so the benchmarks never rot; it asserts no threshold). The output
+is Markdown: the README's performance section is one run's output pasted as it is.
 
-Both coordinators bind upstream's TCP ports 32769-32868, and the benchmarks take all of
+The coordinators bind upstream's TCP ports 32769-32869, and the benchmarks take all of
 them at once: so that other runners on the machine are neither disturbed nor disturbing,
 the benchmarks run in a private network namespace (``unshare --net``, loopback only)
 where the system allows it, else on the host network (``--host-network`` forces that).
@@ -33,20 +36,29 @@ import contention
 import exhaustion
 import output_volume
 import overhead
+import preset
 import pytest_session
 import suite
+import wave_of_tests
 from common import (
+    KILTED,
+    KILTED_VENV,
+    LABELS,
     OURS,
+    OURS_KILTED,
     REPO,
     UPSTREAM,
     Context,
     Section,
     base_environment,
+    kilted_missing,
+    kilted_runner_path,
     ms,
     ours_runner_path,
     progress,
     startup_seconds,
     upstream_runner_path,
+    venv_environment,
 )
 
 BENCHMARKS: dict[str, Callable[[Context], Section]] = {
@@ -56,6 +68,8 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "output": output_volume.run,
     "suite": suite.run,
     "pytest": pytest_session.run,
+    "wave": wave_of_tests.run,
+    "preset": preset.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"
@@ -184,14 +198,48 @@ def header(ctx: Context, network: str, command: str) -> str:
             f"- Date: {now}; command: `{command}`; ros-isolated-test at {_commit()}",
             f"- Machine: {usable} of {cpus} CPUs usable, {_cpu_model()}, {_memory()} memory, "
             f"Linux {platform.release()}; load average at start {load}",
-            f"- Python: {platform.python_implementation()} {platform.python_version()} "
-            f"({sys.executable}), the same interpreter for both runners and every test",
+            f"- Python: {platform.python_implementation()} {platform.python_version()}; "
+            f"ours vs Jazzy upstream both under the Jazzy venv's `{sys.executable}`, ours vs "
+            f"Kilted upstream both under the Kilted venv's `{ctx.python_of(KILTED)}` (each "
+            f"with that venv's environment, as its sourced setup gives it)",
             f"- Interpreter start-up (`python -u -c pass`, median of {reps}): {ms(warm)} as "
             f"under colcon (the ROS wheels' re-exec already done), {ms(cold)} from a plain "
             f"shell (the wheels re-execute the interpreter once)",
-            f"- Runners: ours `{ctx.runners[OURS]}`, upstream `{ctx.runners[UPSTREAM]}`",
+            "- Runners: "
+            + "; ".join(f"{LABELS[r]} `{path}`" for r, path in ctx.runners.items())
+            + "".join(f"; {LABELS[r]}: not measured ({why})" for r, why in ctx.missing.items()),
             f"- Network: {network}; lock directory private to this run; bytecode cached",
         ]
+    )
+
+
+def make_context(work: Path, quick: bool) -> Context:
+    """Both pairs' runners, interpreters and environments (the Kilted pair if set up)."""
+    env = base_environment(work)
+    runners = {OURS: ours_runner_path(), UPSTREAM: upstream_runner_path()}
+    pythons = {OURS: sys.executable, UPSTREAM: sys.executable}
+    envs = {OURS: env, UPSTREAM: env}
+    missing: dict[str, str] = {}
+    why = kilted_missing()
+    if why is None:
+        kilted_python = str(KILTED_VENV / "bin" / "python")
+        kilted_env = venv_environment(env, KILTED_VENV, Path(sys.prefix))
+        runners[OURS_KILTED] = ours_runner_path(kilted_python, kilted_env)
+        runners[KILTED] = kilted_runner_path()
+        for runner in (OURS_KILTED, KILTED):
+            pythons[runner] = kilted_python
+            envs[runner] = kilted_env
+    else:
+        missing = {OURS_KILTED: why, KILTED: why}
+    return Context(
+        python=sys.executable,
+        runners=runners,
+        work=work,
+        env=env,
+        quick=quick,
+        pythons=pythons,
+        envs=envs,
+        missing=missing,
     )
 
 
@@ -207,15 +255,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     work = Path(tempfile.mkdtemp(prefix="ros-isolated-test-bench-"))
     crashed: list[str] = []
     try:
-        ctx = Context(
-            python=sys.executable,
-            runners={OURS: ours_runner_path(), UPSTREAM: upstream_runner_path()},
-            work=work,
-            env=base_environment(work),
-            quick=args.quick,
-        )
+        ctx = make_context(work, args.quick)
         command = "python benches/run.py" + (" --quick" if args.quick else "")
-        print("## Benchmarks: ros-isolated-test vs upstream run_test_isolated.py\n", flush=True)
+        title = "## Benchmarks: ros-isolated-test vs upstream run_test_isolated.py (Jazzy, Kilted)"
+        print(title + "\n", flush=True)
         print(header(ctx, network, command) + "\n", flush=True)
         for name in args.only.split(","):
             try:
