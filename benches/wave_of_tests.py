@@ -3,8 +3,8 @@
 ``ctest -j60`` on a suite of quick tests, or a CI host running several jobs: every
 runner starts, reserves an ID, runs its test and leaves at about the same moment. This
 is the per-test overhead (1) and the contention (2) together, at the scale of whole
-runner processes on 2 CPUs: start-up, imports, the reservation (with its scan of
-/proc), the test, the result file. Taken on a quiet host and with 3000 idle processes
+runner processes on 2 CPUs: start-up, imports, the reservation, the test, the result
+file. Taken on a quiet host and with 3000 idle processes
 alive; the question is whether ours keeps its lead over upstream when the host is busy.
 """
 
