@@ -20,6 +20,7 @@ from ros_isolated_test.runner.settings import (
     DISCOVERY_RANGE_ENV,
     LOCK_DIR_ENV,
     POOL_ENV,
+    RERUNS_ENV,
     WAIT_TIMEOUT_ENV,
 )
 
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 
 EXIT_CODES_HELP = """\b
 Exit codes:
-  N        the command's own exit code (0 passed)
+  N        the command's own exit code (0 passed); after reruns, the last attempt's
   128+N    the command was killed by signal N, or the runner got signal N
   1        the test's result file reports failures, or the result file or
            --output-file could not be fully written
@@ -48,6 +49,7 @@ Environment:
   {LOCK_DIR_ENV}         the lock directory shared by all runners on the machine
   {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
   {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
+  {RERUNS_ENV}           run a failed test again up to N times (run --rerun-failures)
   {DISABLE_VAR}=1                 run without reserving an ID (loudly)
 """
 
@@ -171,6 +173,14 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     "LOCALHOST unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; SUBNET for tests that need other "
     "hosts or more than 32 processes.",
 )
+@click.option(
+    "--rerun-failures",
+    type=click.IntRange(min=0),
+    metavar="N",
+    help=f"Run a test that failed (exit code, failures in its result, timeout) again, up to N "
+    "more times, each on a freshly reserved ID; every attempt is kept in the result file, "
+    f"the exit code is the last attempt's. Default: {RERUNS_ENV}, else 0.",
+)
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
     junit_xml: Path | None,
@@ -180,6 +190,7 @@ def run(
     kill_grace: float,
     wait_timeout: float | None,
     discovery_range: str | None,
+    rerun_failures: int | None,
     command: tuple[str, ...],
 ) -> None:
     """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
@@ -191,7 +202,9 @@ def run(
     SIGHUP to the runner are passed on to the test.
     """
     try:
-        config = settings.read(wait_timeout=wait_timeout, discovery_range=discovery_range)
+        config = settings.read(
+            wait_timeout=wait_timeout, discovery_range=discovery_range, reruns=rerun_failures
+        )
     except settings.SettingsError as error:
         sys.exit(session.report_usage_error(str(error), junit_xml))
     request = RunRequest(
@@ -332,42 +345,12 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
         for path in reporting.result_files(paths)
         if (found := reporting.report_file(path)) is not None
     ]
-    totals = {
-        key: sum(getattr(item, key) for item in reports)
-        for key in ("tests", "errors", "failures", "skipped")
-    }
+    # A flaky case (passed after failing) is listed apart and never fails the report.
     if as_json:
-        rows = [
-            {
-                "path": str(item.path),
-                "tests": item.tests,
-                "errors": item.errors,
-                "failures": item.failures,
-                "skipped": item.skipped,
-                "failed_cases": [
-                    {
-                        "classname": case.classname,
-                        "name": case.name,
-                        "outcome": case.outcome.value,
-                        "message": case.message,
-                    }
-                    for case in item.failed_cases
-                ],
-            }
-            for item in reports
-        ]
-        click.echo(json.dumps({"files": rows, "total": totals}, indent=2))
+        click.echo(reporting.as_json(reports))
     else:
-        for item in reports:
-            counts = reporting.summary_line(item.tests, item.errors, item.failures, item.skipped)
-            click.echo(f"{item.path}: {counts}")
-            if verbose:
-                for case in item.failed_cases:
-                    click.echo(f"- {case.classname} {case.name} ({case.outcome.value})")
-                    for line in (case.message or "(no message)").splitlines()[:20]:
-                        click.echo(f"  {line}")
-        click.echo("")
-        click.echo(f"Summary: {reporting.summary_line(**totals)}")
+        click.echo(reporting.text(reports, verbose), nl=False)
+    totals = reporting.totals(reports)
     if totals["errors"] or totals["failures"]:
         sys.exit(1)
 

@@ -27,6 +27,7 @@ import pytest
 from helpers import capabilities
 from helpers.cmake_package import CMAKE_FILES, PackageBuild, installed_prefix, path_only_env
 from helpers.commands import REPO
+from helpers.domains import free_ids
 from lxml import etree
 
 pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
@@ -329,3 +330,62 @@ def test_installed_from_the_wheel_cmake_finds_it_from_path_alone(
     assert f"ros_isolated_test_DIR:PATH={cmake_dir}" in cache.splitlines(), cache
     runner = Path(site) / "ros_isolated_test" / "runner" / "ament" / "run_test_isolated.py"
     assert f'"-u" "{runner}"' in (build / "CTestTestfile.cmake").read_text()
+
+
+#: Fails the first time it runs (no state file yet), passes after.
+_FLAKY_SH = (
+    'if [ -e "$1" ]; then echo "passed on $ROS_DOMAIN_ID"; exit 0; fi\n'
+    ': > "$1"; echo "failed on $ROS_DOMAIN_ID"; exit 1\n'
+)
+
+
+@capabilities.CTEST.mark
+def test_reruns_reach_a_real_ctest_run(tmp_path: Path, env: dict[str, str]) -> None:
+    """RERUNS of a macro and of ros_isolated_test_all(): a flaky test passes under ctest,
+    its first failure kept as a flakyFailure; the same test without RERUNS fails (control)."""
+    (tmp_path / "flaky.sh").write_text(_FLAKY_SH)
+    calls = "\n".join(
+        f"ros_isolated_add_test({name} COMMAND sh {tmp_path / 'flaky.sh'} {tmp_path / name}"
+        f" GENERATE_RESULT_FOR_RETURN_CODE_ZERO{extra})"
+        for name, extra in (("macro_flaky", " RERUNS 1"), ("once", ""))
+    )
+    done = _configure(
+        tmp_path,
+        f"{calls}\nros_isolated_test_all(RERUNS 1)\n"
+        f"ament_add_test(all_flaky COMMAND sh {tmp_path / 'flaky.sh'} {tmp_path / 'all_flaky'}\n"
+        "  GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n",
+    )
+    assert done.returncode == 0, done.stderr
+    ctest_file = (tmp_path / "build" / "CTestTestfile.cmake").read_text()
+    assert ctest_file.count('"--env" "ROS_ISOLATED_TEST_RERUNS=1"') == 2, ctest_file
+    ctest_env = {
+        **path_only_env(installed_prefix(tmp_path)),
+        "ROS_ISOLATED_TEST_LOCK_DIR": env["ROS_ISOLATED_TEST_LOCK_DIR"],
+        "ROS_ISOLATED_TEST_DOMAINS": ",".join(map(str, free_ids(2))),
+    }
+    ctest_env.pop("ROS_DOMAIN_ID", None)
+    results = tmp_path / "build" / "test_results" / "tiny"
+    for name, passes in (("macro_flaky", True), ("all_flaky", True), ("once", False)):
+        run = subprocess.run(
+            ["ctest", "--test-dir", str(tmp_path / "build"), "-R", f"^{name}$", "-V"],
+            env=ctest_env, capture_output=True, text=True, check=False,
+        )  # fmt: skip
+        assert (run.returncode == 0) is passes, f"{name}: {run.stdout}{run.stderr}"
+        root = etree.parse(str(results / f"{name}.xml")).getroot()
+        properties = {p.get("name"): p.get("value") for p in root.iter("property")}
+        if passes:
+            assert root.find(".//flakyFailure") is not None and root.find(".//failure") is None
+            first, second = (properties.get("ros_domain_ids") or "").split(", ")
+            assert first != second, properties
+            assert properties["attempts"] == "2", properties
+        else:
+            assert root.find(".//failure") is not None and "attempts" not in properties
+
+
+def test_a_bad_reruns_value_stops_configuring(tmp_path: Path) -> None:
+    done = _configure(tmp_path, "ros_isolated_add_test(t COMMAND true RERUNS two)\n")
+    assert done.returncode != 0
+    message = " ".join(done.stderr.split())
+    assert "RERUNS 'two' is not a number of reruns" in message, message
+    good = _configure(tmp_path, "ros_isolated_add_test(t COMMAND true RERUNS 2)\n")
+    assert good.returncode == 0, good.stderr  # the control

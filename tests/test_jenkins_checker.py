@@ -16,6 +16,10 @@ import pytest
 from helpers import capabilities, jenkins_junit10
 from lxml import etree
 
+from ros_isolated_test.xunit import serialise, validate
+from ros_isolated_test.xunit.attempts import merge_attempts
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
+
 SAMPLES = Path(__file__).resolve().parent / "data" / "xunit"
 
 #: Samples junit-10 accepts as they are (section 5.1's table; pytest xunit2 without
@@ -269,6 +273,54 @@ def test_rerun_and_flaky_elements_with_type_are_accepted() -> None:
     assert _suite(RERUN_WITH_TYPE) == []
 
 
+def _attempt_suite(*outcomes: Outcome) -> Suite:
+    """One attempt's canonical suite: case ``c<i>`` has the i-th outcome, with every text."""
+    cases = [
+        Case(
+            "pkg.C",
+            f"c{index}",
+            outcome=outcome,
+            message=f"{outcome.value} message",
+            text=f"{outcome.value} text",
+            type="" if index % 2 else "AssertionError",
+            system_out="out",
+            system_err="err",
+        )
+        for index, outcome in enumerate(outcomes)
+    ]
+    return Suite("pkg.t", cases, 1.0, validate.timestamp(), "h", system_out="console")
+
+
+def _canonical_text(*attempts: Suite) -> str:
+    data = serialise.serialize(merge_attempts(attempts)).decode()
+    return data.split("\n", 1)[1]  # lxml parses no str with an encoding declaration
+
+
+F, E, P, S = Outcome.FAILURE, Outcome.ERROR, Outcome.PASSED, Outcome.SKIPPED
+#: Canonical files of rerun tests (issue 14): flaky*, rerun* and cases that came and went.
+CANONICAL_ATTEMPTS = (
+    _canonical_text(_attempt_suite(F, E, F, S), _attempt_suite(P, P, S, P)),
+    _canonical_text(_attempt_suite(F, E), _attempt_suite(E, F), _attempt_suite(F, E)),
+    _canonical_text(_attempt_suite(F), _attempt_suite(E, P), _attempt_suite(P, P, F)),
+    _canonical_text(_attempt_suite(F, F, F), _attempt_suite()),
+)
+
+
+@pytest.mark.parametrize("text", CANONICAL_ATTEMPTS)
+def test_canonical_files_with_every_attempt_shape_are_accepted(text: str) -> None:
+    root = etree.fromstring(text)
+    tags = {str(node.tag) for node in root.iter()}
+    assert jenkins_junit10.rejections(root) == []
+    assert validate.problems(root) == []
+    assert tags & {"flakyFailure", "flakyError", "rerunFailure", "rerunError"}
+
+
+def test_every_attempt_element_appears_in_the_canonical_documents() -> None:
+    """Else the outside tier below would not put one of them before the real schema."""
+    tags = {str(node.tag) for text in CANONICAL_ATTEMPTS for node in etree.fromstring(text).iter()}
+    assert tags >= {"flakyFailure", "flakyError", "rerunFailure", "rerunError", "stackTrace"}
+
+
 def test_nested_suites_are_allowed() -> None:
     assert _suite(_suite_text()) == []
 
@@ -313,6 +365,7 @@ SYNTHETIC: tuple[str, ...] = (
     _suite_text(COMMENTED),
     *OTHER_ROOTS,
     _suite_text(NAMESPACED_CHILD),
+    *CANONICAL_ATTEMPTS,
 )
 
 #: Documents the schema accepts and the checker rejects on purpose: not a suite root.
@@ -355,6 +408,14 @@ def test_real_junit10_gives_each_synthetic_document_the_same_verdict(
         assert (schema, checker) == (True, False), text
     else:
         assert schema == checker, f"junit-10.xsd {schema}, checker {checker}: {text}"
+
+
+@capabilities.OUTSIDE
+@pytest.mark.parametrize("text", CANONICAL_ATTEMPTS)
+def test_real_junit10_accepts_canonical_files_with_every_attempt_shape(
+    junit10_xsd: etree.XMLSchema, text: str
+) -> None:
+    assert junit10_xsd.validate(etree.fromstring(text)), junit10_xsd.error_log
 
 
 @capabilities.OUTSIDE

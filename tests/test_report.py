@@ -12,6 +12,10 @@ import pytest
 from helpers.commands import run_cli
 from lxml import etree
 
+from ros_isolated_test.xunit import validate
+from ros_isolated_test.xunit.attempts import merge_attempts
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
+
 SAMPLES = Path(__file__).resolve().parent / "data" / "xunit"
 RESULTS = Path("build/pkg_a/test_results/pkg_a")
 LINE = re.compile(r"^(?P<path>.+): (\d+) tests, (\d+) errors, (\d+) failures, (\d+) skipped$")
@@ -280,8 +284,97 @@ def test_json_exit_code_is_zero_when_all_passed(tree: Tree, env: dict[str, str])
     proc = run_cli(["report", "--json", str(RESULTS / "talker.xml")], env, cwd=tree.root)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     data = json.loads(proc.stdout)
-    assert data["total"] == {"tests": 1, "errors": 0, "failures": 0, "skipped": 0}
+    assert data["total"] == {"tests": 1, "errors": 0, "failures": 0, "skipped": 0, "flaky": 0}
     assert data["files"][0]["failed_cases"] == []
+    assert data["files"][0]["flaky_cases"] == []
+
+
+# --- reruns: flaky cases apart, never failures -------------------------------------------------
+
+
+def _attempt(outcome: Outcome, message: str, domain: int) -> Suite:
+    case = Case(
+        "pkg_a.C",
+        "wobbly",
+        outcome=outcome,
+        message=message,
+        text=f"Traceback: {message}",
+        type="AssertionError" if outcome is Outcome.FAILURE else "",
+    )
+    steady = Case("pkg_a.C", "steady")
+    properties = {"ros_domain_id": str(domain)}
+    return Suite("pkg_a.t", [case, steady], 1.0, validate.timestamp(), "h", properties)
+
+
+@pytest.fixture
+def rerun_tree(tmp_path: Path) -> Path:
+    """Canonical files of two rerun tests: one flaky (failed, then passed), one always failing."""
+    results = tmp_path / "results"
+    results.mkdir()
+    flaky = merge_attempts(
+        [_attempt(Outcome.FAILURE, "late node", 3), _attempt(Outcome.PASSED, "", 5)]
+    )
+    (results / "flaky.xml").write_bytes(validate.render(flaky).data)
+    broken = merge_attempts([_attempt(Outcome.FAILURE, f"try {n}", n) for n in (1, 2, 3)])
+    (results / "broken.xml").write_bytes(validate.render(broken).data)
+    return results
+
+
+def test_a_flaky_pass_is_listed_apart_and_counts_as_passed(
+    rerun_tree: Path, env: dict[str, str]
+) -> None:
+    flaky = str(rerun_tree / "flaky.xml")
+    proc = run_cli(["report", flaky], env, cwd=rerun_tree)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert file_lines(proc.stdout) == {flaky: (2, 0, 0, 0)}
+    assert summary_of(proc.stdout) == (2, 0, 0, 0)
+    assert "Flaky: 1 case(s) passed after failing (not counted as failures):" in proc.stdout
+    assert f"- pkg_a.C wobbly (1 failed attempt(s)) in {flaky}\n" in proc.stdout
+    assert "pkg_a.C steady" not in proc.stdout
+
+
+def test_verbose_shows_each_failed_attempt_of_a_flaky_case(
+    rerun_tree: Path, env: dict[str, str]
+) -> None:
+    proc = run_cli(["report", "-v", str(rerun_tree / "flaky.xml")], env, cwd=rerun_tree)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "  flakyFailure: late node\n" in proc.stdout
+
+
+def test_a_case_failing_every_attempt_is_a_failure_and_not_flaky(
+    rerun_tree: Path, env: dict[str, str]
+) -> None:
+    proc = run_cli(["report", str(rerun_tree)], env, cwd=rerun_tree)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert file_lines(proc.stdout) == {
+        str(rerun_tree / "broken.xml"): (2, 0, 1, 0),
+        str(rerun_tree / "flaky.xml"): (2, 0, 0, 0),
+    }
+    assert summary_of(proc.stdout) == (4, 0, 1, 0)
+    flaky_section = proc.stdout.split("Flaky: ", 1)[1]
+    assert "broken.xml" not in flaky_section
+
+
+def test_json_lists_flaky_cases_and_every_failed_attempt(
+    rerun_tree: Path, env: dict[str, str]
+) -> None:
+    proc = run_cli(["report", "--json", str(rerun_tree)], env, cwd=rerun_tree)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["total"] == {"tests": 4, "errors": 0, "failures": 1, "skipped": 0, "flaky": 1}
+    rows = {Path(row["path"]).name: row for row in data["files"]}
+    assert rows["flaky.xml"]["flaky"] == 1
+    assert rows["flaky.xml"]["failed_cases"] == []
+    [flaky] = rows["flaky.xml"]["flaky_cases"]
+    assert (flaky["classname"], flaky["name"], flaky["outcome"]) == ("pkg_a.C", "wobbly", "passed")
+    assert flaky["earlier_failures"] == [
+        {"kind": "flakyFailure", "type": "AssertionError", "message": "late node"}
+    ]
+    assert rows["broken.xml"]["flaky"] == 0
+    [failed] = rows["broken.xml"]["failed_cases"]
+    assert failed["message"] == "try 3"
+    assert [item["kind"] for item in failed["earlier_failures"]] == ["rerunFailure"] * 2
+    assert [item["message"] for item in failed["earlier_failures"]] == ["try 1", "try 2"]
 
 
 # --- usage errors ------------------------------------------------------------------------------

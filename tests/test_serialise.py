@@ -15,7 +15,8 @@ from lxml import etree
 
 from ros_isolated_test import __version__
 from ros_isolated_test.xunit import serialise, validate
-from ros_isolated_test.xunit.model import Case, Outcome, Suite
+from ros_isolated_test.xunit.attempts import for_outcome
+from ros_isolated_test.xunit.model import ATTEMPT_KINDS, Attempt, Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
 
 _HOSTILE = [
@@ -190,6 +191,11 @@ def test_random_values_always_validate() -> None:
         # results never have more than one case, and adopted ones are validated anyway.
         for index, case in enumerate(cases):
             case.name = f"{index} {case.name}"
+            attempts = [
+                Attempt(rng.choice(ATTEMPT_KINDS), word(), word(), word(), word(), word())
+                for _ in range(rng.randint(0, 3))
+            ]
+            case.attempts = for_outcome(attempts, case.outcome)
         suite = _suite(cases, name=word(), hostname=word(), properties={word(): word()})
         data = serialise.serialize(suite)
         found = validate.problems(_parse(data))

@@ -14,6 +14,7 @@ from ros_isolated_test.runner.settings import (
     DISCOVERY_RANGE_ENV,
     LOCK_DIR_ENV,
     POOL_ENV,
+    RERUNS_ENV,
     WAIT_TIMEOUT_ENV,
     SettingsError,
 )
@@ -25,6 +26,7 @@ def test_defaults_and_values_from_the_environment(tmp_path: Path) -> None:
     assert plain.pool == tuple(range(1, 102))
     assert plain.discovery_range is None
     assert plain.isolation_disabled is False
+    assert plain.reruns == 0
     given = settings.read(
         {
             WAIT_TIMEOUT_ENV: " 7.5 ",
@@ -32,6 +34,7 @@ def test_defaults_and_values_from_the_environment(tmp_path: Path) -> None:
             LOCK_DIR_ENV: str(tmp_path),
             DISCOVERY_RANGE_ENV: "subnet",
             "DISABLE_ROS_ISOLATION": "yes",
+            RERUNS_ENV: " 3 ",
         }
     )
     assert given.wait_timeout == 7.5
@@ -39,12 +42,13 @@ def test_defaults_and_values_from_the_environment(tmp_path: Path) -> None:
     assert given.lock_dir == tmp_path
     assert given.discovery_range == "SUBNET"
     assert given.isolation_disabled is True
+    assert given.reruns == 3
 
 
 def test_an_option_wins_and_its_variable_is_not_even_read() -> None:
-    environ = {WAIT_TIMEOUT_ENV: "nan", DISCOVERY_RANGE_ENV: "nowhere"}
-    chosen = settings.read(environ, wait_timeout=3.0, discovery_range="OFF")
-    assert (chosen.wait_timeout, chosen.discovery_range) == (3.0, "OFF")
+    environ = {WAIT_TIMEOUT_ENV: "nan", DISCOVERY_RANGE_ENV: "nowhere", RERUNS_ENV: "many"}
+    chosen = settings.read(environ, wait_timeout=3.0, discovery_range="OFF", reruns=0)
+    assert (chosen.wait_timeout, chosen.discovery_range, chosen.reruns) == (3.0, "OFF", 0)
 
 
 @pytest.mark.parametrize(
@@ -57,6 +61,9 @@ def test_an_option_wins_and_its_variable_is_not_even_read() -> None:
         ({POOL_ENV: "0-5"}, {}, POOL_ENV),
         ({DISCOVERY_RANGE_ENV: "LOCAL HOST"}, {}, DISCOVERY_RANGE_ENV),
         ({}, {"discovery_range": "nowhere"}, "--discovery-range"),
+        ({RERUNS_ENV: "-1"}, {}, RERUNS_ENV),
+        ({RERUNS_ENV: "1.5"}, {}, RERUNS_ENV),
+        ({RERUNS_ENV: "٣"}, {}, RERUNS_ENV),  # a digit to isdigit(), not to a user
     ],
 )
 def test_a_bad_value_is_one_line_naming_its_source(
@@ -66,7 +73,8 @@ def test_a_bad_value_is_one_line_naming_its_source(
         settings.read(environ, **option)  # type: ignore[arg-type]
     message = str(raised.value)
     assert named in message and "\n" not in message
-    others = {WAIT_TIMEOUT_ENV, POOL_ENV, DISCOVERY_RANGE_ENV, "--discovery-range"} - {named}
+    others = {WAIT_TIMEOUT_ENV, POOL_ENV, DISCOVERY_RANGE_ENV, RERUNS_ENV, "--discovery-range"}
+    others -= {named}
     assert not [other for other in others if other in message], message
 
 

@@ -1,4 +1,6 @@
-# ros_isolated_test_all(): one line that puts every test of the package on our RUNNER.
+# ros_isolated_test_all([RERUNS n]): one line that puts every test of the package on our
+# RUNNER; with RERUNS, each of them runs again up to n times when it fails (every attempt
+# kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS.
 #
 # ament_add_gtest, ament_add_gmock, ament_add_pytest_test, add_launch_test and third-party
 # macros all register their tests through ament_add_test, whose RUNNER defaults to ament's
@@ -27,8 +29,25 @@ macro(ros_isolated_test_all)
     # A macro, so what find_package() sets stays in the caller's scope.
     find_package(ament_cmake_test REQUIRED)
   endif()
+  _ros_isolated_test_all_reruns(${ARGN})
   _ros_isolated_test_wrap_ament_add_test()
 endmacro()
+
+# RERUNS of ros_isolated_test_all(), kept for the tests added from now on.
+function(_ros_isolated_test_all_reruns)
+  cmake_parse_arguments(_rit "" "RERUNS" "" ${ARGN})
+  if(_rit_UNPARSED_ARGUMENTS)
+    message(FATAL_ERROR "ros_isolated_test_all(): unknown argument(s) "
+      "'${_rit_UNPARSED_ARGUMENTS}'; it takes RERUNS <n> only")
+  endif()
+  if("RERUNS" IN_LIST _rit_KEYWORDS_MISSING_VALUES)
+    set(_rit_RERUNS "")
+  endif()
+  if(DEFINED _rit_RERUNS)
+    _ros_isolated_test_check_reruns("${_rit_RERUNS}")
+    set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_RERUNS "${_rit_RERUNS}")
+  endif()
+endfunction()
 
 # Defines the wrapper. A function, not a macro: a macro would substitute its own ${ARGN}
 # into the body of the function defined here.
@@ -67,12 +86,19 @@ function(_ros_isolated_test_wrap_ament_add_test)
       "OUTPUT_FILE;RESULT_FILE;RUNNER;SKIP_RETURN_CODE;TIMEOUT;WORKING_DIRECTORY"
       "APPEND_ENV;APPEND_LIBRARY_DIRS;COMMAND;ENV"
       ${ARGN})
+    # RERUNS of ros_isolated_test_all() first: a variable the call's own ENV sets comes
+    # later and wins (ament_add_test passes ENV on as --env, where the last value wins).
+    get_property(_reruns GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_RERUNS)
+    set(_default_env "")
+    if(NOT "${_reruns}" STREQUAL "")
+      set(_default_env ENV "ROS_ISOLATED_TEST_RERUNS=${_reruns}")
+    endif()
     if(_rit_RUNNER)
-      _ament_add_test("${testname}" ${ARGN})
+      _ament_add_test("${testname}" ${ARGN})  # another runner: RERUNS is ours, not its
     else()
       _ros_isolated_test_runner(_runner)
       # Last, so it also replaces an empty RUNNER, which ament_add_test reads as "default".
-      _ament_add_test("${testname}" ${ARGN} RUNNER "${_runner}")
+      _ament_add_test("${testname}" ${_default_env} ${ARGN} RUNNER "${_runner}")
     endif()
     set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_ENTERED FALSE)
   endfunction()

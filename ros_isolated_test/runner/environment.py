@@ -11,7 +11,12 @@ from collections.abc import Mapping, Sequence
 
 from ros_isolated_test.runner import discovery
 from ros_isolated_test.runner.request import EnvAssignment
-from ros_isolated_test.runner.settings import DISABLE_VAR, Settings, disables_isolation
+from ros_isolated_test.runner.settings import (
+    DISABLE_VAR,
+    RERUNS_ENV,
+    Settings,
+    disables_isolation,
+)
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
 #: Set beside ROS_DOMAIN_ID to the same ID wherever a runner (or the pytest plugin) holds
@@ -103,6 +108,9 @@ def decide(
     """
     environ = os.environ if environ is None else environ
     env, notes = apply_assignments(environ, assignments)
+    # Reruns are this runner's to make: a runner started inside the test would make its
+    # own on top of them, N x N attempts.
+    env.pop(RERUNS_ENV, None)
     assigned = any(item.name == DISABLE_VAR and not item.append for item in assignments)
     if assigned:
         disabled, origin = disables_isolation(env.get(DISABLE_VAR)), f" (by {env_origin})"

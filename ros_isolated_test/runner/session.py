@@ -1,7 +1,8 @@
 """The one orchestration path: reserve a domain, run the test, write its result, pick the code.
 
 Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds a
-:class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`. The pytest
+:class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`, which also
+runs a failed test again when reruns are asked for (one loop for every entry point). The pytest
 plugin, whose tests run in its own process, shares the part around the work: the
 reservation, the end of what the work left behind, the blocks, the release
 (:func:`isolation`).
@@ -38,6 +39,7 @@ if TYPE_CHECKING:
     from typing import BinaryIO
 
     from ros_isolated_test.process import proc
+    from ros_isolated_test.xunit.model import Suite
 
 
 def run(request: RunRequest, console: BinaryIO | None = None) -> int:
@@ -73,10 +75,13 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
             exit_codes.USAGE,
         )
     with output as handle:
-        capture = OutputCapture(console, handle)
-        code = _run(request, request.settings, result, capture, console)
+        streams = _Streams(console, handle)
+        try:
+            code = _run(request, request.settings, result, streams, console)
+        finally:
+            streams.close()
     # A result or output file that could not be written is a failed run, never a silent pass.
-    return exit_codes.final(code, result.write_error, capture.file_error)
+    return exit_codes.final(code, result.write_error, streams.capture.file_error)
 
 
 def same_file_message(output_file: Path | None, result_file: Path | None) -> str | None:
@@ -127,13 +132,47 @@ def _console() -> BinaryIO:
     return stream
 
 
+class _Streams:
+    """The console and --output-file every attempt writes to, and the current attempt's capture.
+
+    Each attempt gets a capture of its own, so its result holds its own output tail; a
+    console or output file that failed in an earlier attempt stays failed (and said so).
+    """
+
+    def __init__(self, console: BinaryIO, output: BinaryIO | None) -> None:
+        self._console = console
+        self._output = output
+        self._null: BinaryIO | None = None
+        self.capture = OutputCapture(console, output)
+
+    def next_attempt(self) -> OutputCapture:
+        """A fresh capture for the next attempt, after the same streams."""
+        done = self.capture
+        console = self._console
+        if done.console_error is not None:
+            # A stalled console would stall every attempt again: it gets nothing more.
+            if self._null is None:
+                self._null = open(os.devnull, "wb", buffering=0)  # noqa: SIM115 (closed in close)
+            console = self._null
+        output = self._output if done.file_error is None else None
+        self.capture = OutputCapture(console, output)
+        self.capture.console_error = done.console_error
+        self.capture.file_error = done.file_error
+        return self.capture
+
+    def close(self) -> None:
+        if self._null is not None:
+            self._null.close()
+
+
 def _run(
     request: RunRequest,
     config: settings.Settings,
     result: ResultFile,
-    capture: OutputCapture,
+    streams: _Streams,
     console: BinaryIO,
 ) -> int:
+    capture = streams.capture
     if request.skip_test:
         capture.note("skipping the test (--skip-test)")
         _streams_noted(result, capture)
@@ -149,7 +188,7 @@ def _run(
     # The handlers stay until the final word is written: a signal after the test ended
     # (ctest's SIGTERM, a Ctrl-C) is noted in the result, never lets the result be lost.
     with _interruptible(guard):
-        return _guarded(request, policy, config, result, capture, console, guard)
+        return _guarded(request, policy, config, result, streams, console, guard)
 
 
 def _guarded(
@@ -157,44 +196,20 @@ def _guarded(
     policy: environment.Policy,
     config: settings.Settings,
     result: ResultFile,
-    capture: OutputCapture,
+    streams: _Streams,
     console: BinaryIO,
     guard: _Guard,
 ) -> int:
+    capture = streams.capture
     if policy.isolate and config.notes:
         # Recorded before the reservation: a run that gets no ID says it too.
         result.properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
+    if config.reruns:
+        result.properties[RERUNS_PROPERTY] = str(config.reruns)
+    # What every attempt's result starts from (an attempt adds its ID, its exit, ...).
+    base = dict(result.properties)
     try:
-        with isolation(policy, config, request.command, capture.note) as held:
-            domain_id = None if held is None else held.domain_id
-            if domain_id is not None:
-                capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
-            lines, properties = summary(policy, domain_id, config)
-            for line in lines:
-                capture.note(line)
-            result.properties.update(properties)
-            env = policy.env if domain_id is None else policy.for_domain(domain_id)
-            capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
-            outcome = supervisor.run(
-                request.command,
-                env,
-                capture,
-                request.timeout,
-                request.kill_grace,
-                on_start=guard.start,
-            )
-            if held is not None:
-                held.survivors = outcome.survivors  # what blocks the ID: as named below
-            # Named before the ID is released: the block note (isolation) follows.
-            for leftover in outcome.leftovers:
-                capture.note(leftover_note(leftover))
-            if outcome.leftovers:
-                result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
-            survivors = [survivor.describe() for survivor in outcome.survivors]
-            for survivor in survivors:
-                capture.note(f"process {survivor} of the test could not be ended (SIGKILL failed)")
-            if survivors:
-                result.properties["surviving_processes"] = ", ".join(survivors)
+        outcome, domain_id = _attempt(request, policy, config, result, capture, guard)
     except (PoolExhaustedError, LockDirError) as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
     except Interrupted as interruption:
@@ -206,11 +221,176 @@ def _guarded(
         )
     guard.result = result
     guard.note_late()  # one that came while the ID was released
-    code = _conclude(request, result, capture, outcome)
+    if config.reruns:
+        code = _reruns(request, policy, config, result, streams, guard, base, outcome, domain_id)
+    else:
+        code = _conclude(request, result, capture, outcome)
     if guard.late is not None and "signal_after_test" not in result.written:
         # It came while the final word was being written: written again, saying so.
         result.rewrite()
     return code
+
+
+def _attempt(
+    request: RunRequest,
+    policy: environment.Policy,
+    config: settings.Settings,
+    result: ResultFile,
+    capture: OutputCapture,
+    guard: _Guard,
+) -> tuple[supervisor.Outcome, int | None]:
+    """Run the test once on an ID of its own: reserve, run, end its tree, release.
+
+    Returns how the test ended and the ID it ran on (None: isolation disabled). Raises
+    PoolExhaustedError or LockDirError (no ID), or Interrupted (a signal before it started).
+    """
+    with isolation(policy, config, request.command, capture.note) as held:
+        domain_id = None if held is None else held.domain_id
+        if domain_id is not None:
+            capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
+        lines, properties = summary(policy, domain_id, config)
+        for line in lines:
+            capture.note(line)
+        result.properties.update(properties)
+        env = policy.env if domain_id is None else policy.for_domain(domain_id)
+        capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
+        outcome = supervisor.run(
+            request.command,
+            env,
+            capture,
+            request.timeout,
+            request.kill_grace,
+            on_start=guard.start,
+        )
+        if held is not None:
+            held.survivors = outcome.survivors  # what blocks the ID: as named below
+        # Named before the ID is released: the block note (isolation) follows.
+        for leftover in outcome.leftovers:
+            capture.note(leftover_note(leftover))
+        if outcome.leftovers:
+            result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
+        survivors = [survivor.describe() for survivor in outcome.survivors]
+        for survivor in survivors:
+            capture.note(f"process {survivor} of the test could not be ended (SIGKILL failed)")
+        if survivors:
+            result.properties["surviving_processes"] = ", ".join(survivors)
+    return outcome, domain_id
+
+
+#: The suite property saying how many reruns a failed test was allowed.
+RERUNS_PROPERTY = "rerun_failures"
+
+
+def _reruns(
+    request: RunRequest,
+    policy: environment.Policy,
+    config: settings.Settings,
+    result: ResultFile,
+    streams: _Streams,
+    guard: _Guard,
+    base: dict[str, str],
+    outcome: supervisor.Outcome,
+    domain_id: int | None,
+) -> int:
+    """Conclude the first attempt; while it failed and reruns are left, run the test again.
+
+    Each attempt after the previous one's full cleanup (tree swept, ID released), on an
+    ID reserved afresh; each attempt's result is made canonical before the next one can
+    overwrite the test's own file. The file left holds every attempt (merge_attempts);
+    the exit code is the last attempt's. A signal, a rerun that gets no ID, or a failure
+    no rerun can change (the command cannot start, the result cannot be written) ends
+    the series.
+    """
+    from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY, merge_attempts
+
+    total = config.reruns + 1
+    suites: list[Suite] = []
+    ids: list[str] = []
+    number = ran = 1
+    while True:
+        capture = streams.capture
+        if number == 1:
+            # What a test that passes at once says: one attempt, no rewrite needed.
+            result.properties[ATTEMPTS_PROPERTY] = "1"
+        result.last_suite = None  # set again only if this attempt's result is written
+        code = _conclude(request, result, capture, outcome)
+        ids.append("unset" if domain_id is None else str(domain_id))
+        ran = number
+        if result.last_suite is not None:
+            suites.append(result.last_suite)
+            # The merge counts the attempts itself; attempt 1's own count would be kept
+            # as a difference (attempt_1.attempts).
+            result.last_suite.properties.pop(ATTEMPTS_PROPERTY, None)
+        why = _failed_because(outcome, code, capture, result)
+        if why is None or number == total or guard.late is not None:
+            break
+        number += 1
+        capture.note(f"attempt {number} of {total}: attempt {number - 1} failed ({why})")
+        capture = streams.next_attempt()
+        if not result.next_attempt(number - 1, base, _placeholder_merge(suites)):
+            break  # said on stderr; the attempts so far are written below
+        try:
+            # Signals end a rerun that has not started yet (one queued for an ID) at once.
+            guard.test_started = guard.concluding = False
+            if guard.late is not None:
+                raise Interrupted(guard.late)
+            outcome, domain_id = _attempt(request, policy, config, result, capture, guard)
+        except (PoolExhaustedError, LockDirError) as error:
+            capture.note(f"attempt {number} did not run: {error}")
+            result.properties["rerun_not_run"] = str(error)
+            break
+        except Interrupted as interruption:
+            name = exit_codes.signal_name(interruption.signum)
+            capture.note(f"attempt {number} did not run: interrupted by {name}")
+            result.properties["signal_after_test"] = name
+            break
+    if len(suites) < 2 or result.path is None:
+        if number > ran:
+            # A rerun that never started: the last attempt's word, with why it stopped.
+            result.properties = {**base, **result.written, **result.properties}
+            result.rewrite()
+        return code
+    merged = merge_attempts(suites)
+    merged.properties["ros_domain_ids"] = ", ".join(ids)
+    rendered = result.write_merged(merged)
+    if rendered is not None and rendered.failed and code == exit_codes.PASSED:
+        code = exit_codes.FAILED  # a merged file that fails (a bug of ours) never passes
+    return code
+
+
+def _failed_because(
+    outcome: supervisor.Outcome, code: int, capture: OutputCapture, result: ResultFile
+) -> str | None:
+    """Why this attempt failed in a way a rerun may change; None: it passed, or no rerun can."""
+    if code == exit_codes.PASSED or outcome.start_error is not None:
+        return None
+    if outcome.received_signal is not None or result.write_error is not None:
+        return None  # the runner was told to stop / the result cannot be written
+    if capture.file_error is not None:
+        return None  # the output file is cut short whatever a rerun does
+    if outcome.timed_out:
+        return "timed out"
+    if outcome.signal is not None:
+        return f"killed by {exit_codes.signal_name(outcome.signal)}"
+    if outcome.returncode:
+        return f"exit code {outcome.returncode}"
+    return "its result file reports failures"
+
+
+def _placeholder_merge(suites: list[Suite]) -> Callable[[Suite], Suite]:
+    """What the placeholder of a rerun holds: the attempts so far, then the unfinished one.
+
+    If ctest kills the runner during the rerun, the failures before it stay on record.
+    Copies: the final merge gets the attempts as they were.
+    """
+    import copy
+
+    from ros_isolated_test.xunit.attempts import merge_attempts
+
+    def merge(placeholder: Suite) -> Suite:
+        return merge_attempts([*copy.deepcopy(suites), placeholder])
+
+    return merge
 
 
 #: The suite property holding the settings' notes (IDs left out of the default pool, ...).

@@ -29,6 +29,8 @@ if TYPE_CHECKING:
 WAIT_TIMEOUT_ENV = "ROS_ISOLATED_TEST_WAIT_TIMEOUT"
 DEFAULT_WAIT_TIMEOUT = 600.0
 DISCOVERY_RANGE_ENV = discovery.OVERRIDE_ENV
+#: How many times a failed test runs again (``run --rerun-failures``; CMake's ``RERUNS``).
+RERUNS_ENV = "ROS_ISOLATED_TEST_RERUNS"
 DISABLE_VAR = "DISABLE_ROS_ISOLATION"
 #: Values of DISABLE_ROS_ISOLATION that do not disable (upstream treats "set" as disabled).
 _FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
@@ -39,12 +41,14 @@ __all__ = [
     "DISCOVERY_RANGE_ENV",
     "LOCK_DIR_ENV",
     "POOL_ENV",
+    "RERUNS_ENV",
     "WAIT_TIMEOUT_ENV",
     "Settings",
     "SettingsError",
     "defaults",
     "disables_isolation",
     "read",
+    "reruns_from",
 ]
 
 
@@ -61,6 +65,7 @@ class Settings:
         "lock_dir",
         "notes",
         "pool",
+        "reruns",
         "wait_timeout",
     )
 
@@ -73,6 +78,7 @@ class Settings:
         discovery_range: str | None = None,
         isolation_disabled: bool = False,
         notes: tuple[str, ...] = (),
+        reruns: int = 0,
     ) -> None:
         #: The shared lock directory (ROS_ISOLATED_TEST_LOCK_DIR).
         self.lock_dir = lock_dir
@@ -87,12 +93,14 @@ class Settings:
         #: One line each, said before the test runs and kept in the result file: what the
         #: settings changed on their own (IDs left out of the default pool) or warn about.
         self.notes = notes
+        #: How many more times a failed test runs (--rerun-failures, ROS_ISOLATED_TEST_RERUNS).
+        self.reruns = reruns
 
     def __repr__(self) -> str:
         return (
             f"Settings(lock_dir={self.lock_dir!r}, pool={len(self.pool)} IDs, "
             f"wait_timeout={self.wait_timeout!r}, discovery_range={self.discovery_range!r}, "
-            f"isolation_disabled={self.isolation_disabled!r})"
+            f"isolation_disabled={self.isolation_disabled!r}, reruns={self.reruns!r})"
         )
 
 
@@ -115,12 +123,27 @@ def _seconds(text: str, name: str, fix: str) -> float:
     return value
 
 
+def reruns_from(text: str, origin: str = RERUNS_ENV) -> int:
+    """A count of reruns (0 or more), or :class:`SettingsError` naming ``origin``.
+
+    Whole numbers only: "1.5" or "-1" is a typo, never silently rounded or ignored.
+    """
+    value = text.strip()
+    if not value.isdigit() or not value.isascii():
+        raise SettingsError(
+            f"{origin}={text!r} is not a number of reruns; set a whole number, 0 or more "
+            "(e.g. 2), or unset it"
+        )
+    return int(value)
+
+
 def read(
     environ: Mapping[str, str] | None = None,
     *,
     wait_timeout: float | None = None,
     discovery_range: str | None = None,
     port_range: tuple[int, int] | None = None,
+    reruns: int | None = None,
 ) -> Settings:
     """The settings from options (None: not given) and ``environ`` (default: os.environ).
 
@@ -143,6 +166,9 @@ def read(
             discovery_range = discovery.check_range(discovery_range, origin)
         except discovery.DiscoveryError as error:
             raise SettingsError(str(error)) from None
+    if reruns is None:
+        text = environ.get(RERUNS_ENV, "")
+        reruns = reruns_from(text) if text.strip() else 0
     try:
         pool, notes = choose_pool(environ, port_range)
     except PoolSpecError as error:
@@ -154,6 +180,7 @@ def read(
         discovery_range=discovery_range,
         isolation_disabled=disables_isolation(environ.get(DISABLE_VAR)),
         notes=notes,
+        reruns=reruns,
     )
 
 

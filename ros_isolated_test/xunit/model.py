@@ -28,10 +28,47 @@ class Outcome(Enum):
         return self in (Outcome.ERROR, Outcome.FAILURE)
 
 
+class Attempt:
+    """One earlier failed run of a case, kept so a rerun cannot hide a flake.
+
+    ``kind`` is the element it becomes inside ``<testcase>``: ``flakyFailure`` /
+    ``flakyError`` when the case finally passed, ``rerunFailure`` / ``rerunError`` when
+    it failed every time (Surefire's shape, which Jenkins shows). junit-10 requires
+    ``type``; the serialiser writes a placeholder when it is empty.
+    """
+
+    __slots__ = ("kind", "message", "system_err", "system_out", "text", "type")
+
+    def __init__(
+        self,
+        kind: str,
+        message: str = "",
+        type: str = "",
+        text: str = "",
+        system_out: str = "",
+        system_err: str = "",
+    ) -> None:
+        if kind not in ATTEMPT_KINDS:
+            raise ValueError(f"attempt kind {kind!r} is not one of {ATTEMPT_KINDS}")
+        self.kind = kind
+        self.message = message
+        self.type = type
+        self.text = text
+        self.system_out = system_out
+        self.system_err = system_err
+
+    def __repr__(self) -> str:
+        return f"Attempt({self.kind!r}, {self.message!r})"
+
+
+ATTEMPT_KINDS = ("flakyFailure", "flakyError", "rerunFailure", "rerunError")
+
+
 class Case:
     """One test case; ``classname`` already carries the ``<package>.`` prefix."""
 
     __slots__ = (
+        "attempts",
         "classname",
         "message",
         "name",
@@ -54,6 +91,7 @@ class Case:
         type: str = "",
         system_out: str = "",
         system_err: str = "",
+        attempts: list[Attempt] | None = None,
     ) -> None:
         self.classname = classname
         self.name = name
@@ -64,6 +102,12 @@ class Case:
         self.type = type
         self.system_out = system_out
         self.system_err = system_err
+        self.attempts: list[Attempt] = attempts if attempts is not None else []
+
+    @property
+    def flaky(self) -> bool:
+        """Passed in the end after failing at least once: not a failure, but shown."""
+        return not self.outcome.failed and any(a.kind.startswith("flaky") for a in self.attempts)
 
     @classmethod
     def saying(

@@ -5,7 +5,9 @@ tests/data/xunit; tests/test_normalise_samples.py says what is odd in it); the f
 are generic where they can be and keyed to a producer's shape where not: gtest's
 nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases, launch_testing's
 text-only-in-message, xmlrunner's timestamped suite names, ctest's missing ``errors``
-and empty output, gtest and ctest disabled tests shown as passed.
+and empty output, gtest and ctest disabled tests shown as passed. Some fixes are for one
+reader: GitLab's case key and its XML type converter (see ``distinct_gitlab_keys`` and
+``gitlab_safe_type``), Jenkins dropping a suite without cases (``no_cases``).
 """
 
 from __future__ import annotations
@@ -15,8 +17,9 @@ import re
 from collections.abc import Iterable
 
 from ros_isolated_test.xunit.bounded_text import bounded
-from ros_isolated_test.xunit.model import Case, Outcome
+from ros_isolated_test.xunit.model import Attempt, Case, Outcome
 from ros_isolated_test.xunit.reader import (
+    MAX_OUTCOMES,
     RawCase,
     RawOutcome,
     ReadResult,
@@ -26,6 +29,28 @@ from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token
 _XMLRUNNER_SUFFIX = re.compile(r"-[0-9]{14}$")
 _SETUP_CLASS = re.compile(r"^(setUpClass|tearDownClass|setUpModule|tearDownModule) \((.+)\)$")
 _PRIMARY = {"failure": Outcome.FAILURE, "error": Outcome.ERROR, "skipped": Outcome.SKIPPED}
+#: ``type`` values GitLab's XML converter (ActiveSupport's ``Hash.from_xml``, matched
+#: exactly as written) acts on: ``symbol`` and ``yaml`` are refused, which drops the whole
+#: file; ``date``/``datetime`` fail on text that is no date; the others turn the element's
+#: text into a number, a decoded blob or an empty list. ``string`` is harmless.
+GITLAB_CONVERTED_TYPES = frozenset(
+    {
+        "symbol",
+        "yaml",
+        "date",
+        "datetime",
+        "dateTime",
+        "integer",
+        "float",
+        "double",
+        "decimal",
+        "boolean",
+        "base64Binary",
+        "binary",
+        "file",
+        "array",
+    }
+)
 
 
 def prefixed(package: str | None, classname: str) -> str:
@@ -55,24 +80,131 @@ def cases_from(read: ReadResult, package: str | None, fallback: str) -> list[Cas
     _qualify_repeats_across_suites(cases, [raw.suite for raw in read.cases])
     if read.dropped:
         cases.append(_dropped(read, package, fallback))
+    claims = unreported(read)
     if read.problems:
-        cases.append(damage_case(read, package, fallback))
-    unreported = _claimed_failures(read) - _failed_elements(read)
-    if unreported > 0:
+        # The damage explains what its counts miss: one error case, not one per symptom.
+        cases.append(damage_case(read, package, fallback, claims))
+    elif claims:
         message = (
-            f"The result file counts {unreported} more failure(s) or error(s) than its "
-            "test cases show; the producer reported them nowhere else."
+            f"The result file's own counts claim {' and '.join(claims)} than its test "
+            "cases show; the producer reported them nowhere else."
         )
         cases.append(
             Case.saying(
                 prefixed(package, fallback),
-                "unreported failures",
+                "unreported test cases",
                 Outcome.ERROR,
                 message,
                 "CountMismatch",
             )
         )
-    return merge_duplicates(cases)
+    cases = merge_duplicates(cases)
+    renamed = distinct_gitlab_keys(cases)
+    if renamed:
+        read.repairs.append(renamed)
+    retyped = _gitlab_safe_types(cases)
+    if retyped:
+        read.repairs.append(retyped)
+    if not cases:
+        cases.append(no_cases(prefixed(package, fallback)))
+    return cases
+
+
+def unreported(read: ReadResult) -> list[str]:
+    """What the producer's own counts claim beyond what its cases show, per kind.
+
+    Tests, failures and errors (together: producers mix them up), and skips (with
+    ``disabled``, which gtest and ctest count apart) are all treated alike: a claim no
+    element shows is reported, never silently dropped; more elements than claimed
+    (pytest's duplicate cases and reruns) is normal and not reported.
+    """
+    kept_skips = sum(1 for raw in read.cases if _skipped(raw))
+    claims = (
+        ("test case(s)", _claimed(read, "tests"), len(read.cases) + sum(read.dropped.values())),
+        ("failure(s) or error(s)", _claimed(read, "failures", "errors"), _failed_elements(read)),
+        (
+            "skipped test(s)",
+            _claimed(read, "skipped", "disabled"),
+            kept_skips + read.dropped["skipped"],
+        ),
+    )
+    return [f"{claimed - shown} more {what}" for what, claimed, shown in claims if claimed > shown]
+
+
+def _skipped(raw: RawCase) -> bool:
+    if any(item.tag == "skipped" for item in raw.outcomes):
+        return True
+    return raw.attrs.get("status") == "disabled" or raw.attrs.get("result") == "suppressed"
+
+
+def no_cases(classname: str) -> Case:
+    """The one case of a result that holds none, so every reader shows that nothing ran.
+
+    Jenkins drops a suite without a ``<testcase>`` and others show an empty, passing
+    suite. A skip is shown by all of them and fails nothing by itself: the test's exit
+    decides (pytest's 5, "no tests collected", fails the run through the exit case).
+    """
+    message = (
+        "The result file reports no test cases: nothing was tested. An empty test "
+        "selection or discovery is usually a mistake in the test's configuration."
+    )
+    return Case.saying(classname, "no test cases", Outcome.SKIPPED, message, "NoTestCases")
+
+
+def gitlab_safe_type(value: str) -> str:
+    """A producer's ``type`` that GitLab's converter leaves alone, keeping what it said."""
+    return f"{value} (producer type)" if value in GITLAB_CONVERTED_TYPES else value
+
+
+def _gitlab_safe_types(cases: list[Case]) -> str:
+    found: list[str] = []
+    for case in cases:
+        items: list[Case | Attempt] = [case, *case.attempts]
+        for item in items:
+            if item.type in GITLAB_CONVERTED_TYPES:
+                found.append(item.type)
+                item.type = gitlab_safe_type(item.type)
+    if not found:
+        return ""
+    kinds = ", ".join(sorted(set(found)))
+    return (
+        f"{len(found)} type attribute(s) GitLab's XML converter would act on ({kinds}) "
+        "were written as '<type> (producer type)'"
+    )
+
+
+def distinct_gitlab_keys(cases: list[Case]) -> str:
+    """Rename a case whose GitLab key another case already has; say what was renamed.
+
+    GitLab keys a case by ``"<suite>_<classname>_<name>"`` and keeps one per key, so
+    classname ``pkg.a`` + name ``b_c`` and ``pkg.a_b`` + ``c`` would become one case
+    there while every other reader shows two. The later one gets a number, visibly.
+    """
+    keys: set[str] = set()
+    pairs = {(case.classname, case.name) for case in cases}
+    renamed: list[str] = []
+    for case in cases:
+        key = f"{case.classname}_{case.name}"
+        if key not in keys:
+            keys.add(key)
+            continue
+        number = 2
+        while True:
+            name = f"{case.name} [{number}]"
+            if f"{case.classname}_{name}" not in keys and (case.classname, name) not in pairs:
+                break
+            number += 1
+        renamed.append(f"{case.classname} {case.name!r} as {name!r}")
+        case.name = name
+        pairs.add((case.classname, name))
+        keys.add(f"{case.classname}_{name}")
+    if not renamed:
+        return ""
+    shown = "; ".join(renamed[:5]) + ("; ..." if len(renamed) > 5 else "")
+    return (
+        f"{len(renamed)} test case(s) renamed whose GitLab key (classname_name) another "
+        f"case already had: {shown}"
+    )
 
 
 def _count(attrs: dict[str, str], *names: str) -> int:
@@ -85,10 +217,10 @@ def _count(attrs: dict[str, str], *names: str) -> int:
     return total
 
 
-def _claimed_failures(read: ReadResult) -> int:
-    """What the producer's own counts say failed: the root's or the suites' total."""
-    root = _count(read.root_attrs, "failures", "errors") if read.is_xunit else 0
-    suites = sum(_count(suite.attrs, "failures", "errors") for suite in read.suites)
+def _claimed(read: ReadResult, *names: str) -> int:
+    """What the producer's own counts say: the root's or the suites' total, the larger."""
+    root = _count(read.root_attrs, *names) if read.is_xunit else 0
+    suites = sum(_count(suite.attrs, *names) for suite in read.suites)
     return max(root, suites)
 
 
@@ -111,13 +243,18 @@ def _qualify_repeats_across_suites(cases: list[Case], suites: list[str]) -> None
             case.name = f"{case.name} [{suite}]"
 
 
-def damage_case(read: ReadResult, package: str | None, fallback: str) -> Case:
+def damage_case(
+    read: ReadResult, package: str | None, fallback: str, claims: Iterable[str] = ()
+) -> Case:
     """What was wrong with the file, as an error case, so no reader misses it."""
     kept = len(read.cases)
     detail = "; ".join(read.problems)
     message = f"Invalid result file {read.path.name}, not fully readable: {detail}."
     if kept:
         message += f" {kept} test case(s) before the damage were kept."
+    missing = " and ".join(claims)
+    if missing:
+        message += f" Its own counts claim {missing} than the kept test cases show."
     return Case.saying(
         prefixed(package, fallback), "result file", Outcome.ERROR, message, "BrokenResultFile"
     )
@@ -203,10 +340,28 @@ def _set_outcome(case: Case, raw: RawCase) -> None:
             case.text = case.text or case.message
         elif case.message and not case.text:
             case.text = case.message
-    if notes:
-        # Surefire's rerun/flaky elements: earlier attempts, not the outcome.
-        attempts = _join(f"{item.tag}: {_message(item) or _text(item)}" for item in notes)
-        case.system_out = _join([case.system_out, attempts])
+    # Surefire's rerun/flaky elements: earlier attempts, not the outcome.
+    for item in notes:
+        case.attempts.append(
+            Attempt(
+                _attempt_kind(item.tag, case.outcome),
+                message=_message(item),
+                type=item.attrs.get("type", ""),
+                text=_text(item),
+                system_out=item.system_out if item.system_out.strip() else "",
+                system_err=item.system_err if item.system_err.strip() else "",
+            )
+        )
+
+
+def _attempt_kind(tag: str, final: Outcome) -> str:
+    """An earlier attempt's element, named after the final outcome as Surefire means it.
+
+    ``flaky*`` when the case finally passed, ``rerun*`` when it failed, whatever the
+    producer wrote and after duplicates are merged: Jenkins reads them so.
+    """
+    kind = "Error" if tag.endswith("Error") else "Failure"
+    return f"rerun{kind}" if final.failed else f"flaky{kind}"
 
 
 def _message(item: RawOutcome) -> str:
@@ -246,6 +401,11 @@ def merge_duplicates(cases: list[Case]) -> list[Case]:
             first.message = _join([first.message, case.message])
             first.text = _join([first.text, case.text])
         first.time = max(first.time, case.time)
+        # Bounded as the reader bounds one case's elements: many duplicates must not
+        # make one case of unbounded size.
+        first.attempts += case.attempts[: max(MAX_OUTCOMES - len(first.attempts), 0)]
+        for attempt in first.attempts:
+            attempt.kind = _attempt_kind(attempt.kind, first.outcome)
         first.system_out = _join([first.system_out, case.system_out])
         first.system_err = _join([first.system_err, case.system_err])
     return list(merged.values())

@@ -62,9 +62,8 @@ MAX_DEPTH = 1000
 _CASE_KEYS = frozenset({"name", "classname", "time", "status", "result"})
 _OUTCOME_KEYS = frozenset({"message", "type"})
 
-OUTCOME_TAGS = frozenset(
-    {"failure", "error", "skipped", "rerunFailure", "rerunError", "flakyFailure", "flakyError"}
-)
+_ATTEMPT_TAGS = frozenset({"rerunFailure", "rerunError", "flakyFailure", "flakyError"})
+OUTCOME_TAGS = frozenset({"failure", "error", "skipped"}) | _ATTEMPT_TAGS
 #: A character reference, unless it is one of the many that are legal at a glance (32 to
 #: 49999, 0x20 to 0xCFFF): those pass in C, not through a Python call each.
 _CHAR_REF = re.compile(
@@ -75,6 +74,24 @@ _CHAR_REF = re.compile(
 _OPEN_CHAR_REF = re.compile(r"&#x?[0-9a-fA-F]{0,10}$")
 #: Markup that declares a DTD or entities: never allowed to reach the parser.
 _DTD_MARKUP = re.compile(r"<!(?=DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)")
+#: A DOCTYPE's internal entities are expanded, as text, when they are small: the prolog
+#: is looked at up to PROLOG_LIMIT characters, one entity's text may reach ENTITY_LIMIT
+#: characters (nesting ENTITY_DEPTH deep) and all expansions in one file ENTITY_BUDGET.
+#: Beyond those (an entity bomb), and for external entities, which are never read, an
+#: entity stays undefined: the file reads as damaged at its first use of it.
+PROLOG_LIMIT = 64 * 1024
+ENTITY_LIMIT = 4096
+ENTITY_BUDGET = 1024 * 1024
+ENTITY_DEPTH = 32
+_ENTITY_NAME = r"[A-Za-z_:][A-Za-z0-9._:-]{0,63}"
+_ENTITY_DECLARATION = re.compile(rf"<!ENTITY[ \t\r\n]+({_ENTITY_NAME})[ \t\r\n]+([\"'])")
+_ENTITY_REFERENCE = re.compile(rf"&({_ENTITY_NAME});")
+_OPEN_ENTITY_REFERENCE = re.compile(rf"&(?:{_ENTITY_NAME})?$")
+_LEGAL_CHAR_REF = re.compile(r"&#(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));")
+_PREDEFINED = {"amp": "&", "lt": "<", "gt": ">", "quot": '"', "apos": "'"}
+_ESCAPED = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&apos;"})
+#: Where the prolog scan stops inside a DOCTYPE: a tag, or a quoted literal to skip.
+_PROLOG_MARK = re.compile("[<\"']")
 _ENCODING = re.compile(rb"""^<\?xml[^>]*encoding\s*=\s*["']([A-Za-z0-9._-]+)["']""")
 _counts = threading.local()
 
@@ -95,11 +112,16 @@ codecs.register_error("ros_isolated_test.count", _count_and_show)
 
 @dataclass(slots=True)
 class RawOutcome:
-    """A failure, error or skipped element as the producer wrote it."""
+    """A failure, error or skipped element as the producer wrote it.
+
+    Surefire's rerun and flaky elements hold an attempt's own output as children.
+    """
 
     tag: str
     attrs: dict[str, str]
     text: str
+    system_out: str = ""
+    system_err: str = ""
 
 
 @dataclass(slots=True)
@@ -245,6 +267,9 @@ class _Builder:
         self.in_counted_case = False
         self.text: _Gathered | None = None
         self.outcome_attrs: dict[str, str] = {}
+        #: The output of an attempt inside a rerun or flaky element, apart from its text.
+        self.attempt_output: _Gathered | None = None
+        self.outcome_output: dict[str, str] = {}
         self.root_closed = False
         self.dropped_outcomes = 0
         self.dropped_suites = 0
@@ -275,6 +300,9 @@ class _Builder:
                 self._start_outcome(name, attrib)
             elif name in ("system-out", "system-err"):
                 self.text = self.budget.text(self.further)
+        elif self.case is not None and parent in _ATTEMPT_TAGS and self.text is not None:
+            if name in ("system-out", "system-err"):
+                self.attempt_output = self.budget.text(self.further)
         elif self.case is None and parent == "testsuite" and name in ("system-out", "system-err"):
             self.text = self.budget.text()
 
@@ -294,17 +322,23 @@ class _Builder:
             self.dropped_outcomes += 1
             return
         self.outcome_attrs = self.budget.attrs(attrib, _OUTCOME_KEYS, self.further)
+        self.outcome_output = {}
         self.text = self.budget.text(self.further)
 
     def data(self, data: str | bytes) -> None:
-        if self.text is not None:
-            self.text.add(data if isinstance(data, str) else data.decode("utf-8", "replace"))
+        target = self.attempt_output or self.text
+        if target is not None:
+            target.add(data if isinstance(data, str) else data.decode("utf-8", "replace"))
 
     def end(self, tag: str) -> None:
         name = _local(tag)
         if self.stack:
             self.stack.pop()
         parent = self.stack[-1] if self.stack else None
+        if self.attempt_output is not None and name in ("system-out", "system-err"):
+            self.outcome_output[name] = self.budget.take(self.attempt_output)
+            self.attempt_output = None
+            return
         if name == "testcase" and self.in_counted_case and parent != "testcase":
             self.result.dropped[self.counting or "passed"] += 1
             self.in_counted_case = False
@@ -315,7 +349,16 @@ class _Builder:
         elif self.text is not None and parent == "testcase" and self.case is not None:
             value = self.budget.take(self.text)
             if name in OUTCOME_TAGS:
-                self.case.outcomes.append(RawOutcome(name, self.outcome_attrs, value))
+                output = self.outcome_output
+                self.case.outcomes.append(
+                    RawOutcome(
+                        name,
+                        self.outcome_attrs,
+                        value,
+                        output.get("system-out", ""),
+                        output.get("system-err", ""),
+                    )
+                )
             elif name == "system-out":
                 self.case.system_out = value
             elif name == "system-err":
@@ -472,6 +515,7 @@ class _Markup:
         self.section = 0
         self.dropped_attributes = 0
         self.damage: str | None = None
+        self.entities = _Entities()
 
     def feed(self, text: str, final: bool) -> str:
         """The next sanitised piece, bounded; ``final`` flushes what was held back."""
@@ -507,7 +551,7 @@ class _Markup:
             start = pos
             plain = _PLAIN.match(text, start)
             assert plain is not None
-            out.append(plain.group())
+            out.append(self.entities.substitute(plain.group()))
             pos = plain.end()
         if start >= len(text):
             return start
@@ -574,7 +618,7 @@ class _Markup:
         found = text.find(self.quote, pos)
         stop = found if found >= 0 else len(text)
         if self.keep_attribute:
-            self.value.add(text[pos:stop], out)
+            self.value.add(self.entities.substitute(text[pos:stop]), out)
         if found < 0:
             return stop
         if self.keep_attribute:
@@ -619,6 +663,135 @@ class _Markup:
         return pos
 
 
+class _Entities:
+    """A DOCTYPE's small internal entities, put into text and attribute values as text.
+
+    Producers rarely declare entities, but one that does (a message kept in one place)
+    must not lose its failure's text: without them the parser stops at the first use.
+    The declarations are read from the prolog here, never by the parser, so nothing
+    external is loaded; an entity's markup, if any, is kept as text.
+    """
+
+    def __init__(self) -> None:
+        self.prolog: list[str] = []
+        self.size = 0
+        self.escaped: dict[str, str] = {}
+        self.used = 0
+        self.over_budget = 0
+
+    def capture(self, text: str) -> None:
+        """Keep prolog text (bounded) to look for declarations once the root starts."""
+        room = PROLOG_LIMIT + 1 - self.size
+        if room > 0 and text:
+            self.prolog.append(text[:room])
+            self.size += min(len(text), room)
+
+    def define(self) -> list[str]:
+        """Expand the declared entities; returns what to report about them."""
+        prolog = _without_comments("".join(self.prolog))
+        self.prolog = []
+        start = prolog.find("<!DOCTYPE")
+        if start < 0:
+            return []
+        notes = []
+        if self.size > PROLOG_LIMIT:
+            notes.append(
+                f"the prolog is over {PROLOG_LIMIT} characters: entities declared beyond "
+                "that were not expanded"
+            )
+        literals: dict[str, str | None] = {}
+        for match in _ENTITY_DECLARATION.finditer(prolog, start):
+            end = prolog.find(match.group(2), match.end(), match.end() + ENTITY_LIMIT + 1)
+            # The first declaration of a name binds (XML 1.0, section 4.2).
+            literals.setdefault(match.group(1), prolog[match.end() : end] if end >= 0 else None)
+        values: dict[str, str | None] = {}
+        for name in literals:
+            self._expand(name, literals, values, ())
+        self.escaped = {
+            name: value.translate(_ESCAPED) for name, value in values.items() if value is not None
+        }
+        if self.escaped:
+            notes.append(
+                f"{len(self.escaped)} internal entit{'y' if len(self.escaped) == 1 else 'ies'} "
+                f"of the DOCTYPE expanded as text: {', '.join(sorted(self.escaped)[:10])}"
+            )
+        refused = sorted(name for name, value in values.items() if value is None)
+        if refused:
+            notes.append(
+                f"{len(refused)} entit{'y' if len(refused) == 1 else 'ies'} not expanded "
+                f"(over {ENTITY_LIMIT} characters, recursive, nested over {ENTITY_DEPTH} "
+                f"deep, or referring to one not expanded): {', '.join(refused[:10])}"
+            )
+        return notes
+
+    def _expand(
+        self,
+        name: str,
+        literals: dict[str, str | None],
+        values: dict[str, str | None],
+        open_names: tuple[str, ...],
+    ) -> str | None:
+        if name in values:
+            return values[name]
+        literal = literals.get(name)
+        if literal is None or name in open_names or len(open_names) >= ENTITY_DEPTH:
+            values[name] = None
+            return None
+        text = _LEGAL_CHAR_REF.sub(_character, literal)
+        pieces: list[str] = []
+        size, pos = 0, 0
+        for match in _ENTITY_REFERENCE.finditer(text):
+            reference = match.group(1)
+            inner = _PREDEFINED.get(reference)
+            if inner is None:
+                inner = self._expand(reference, literals, values, (*open_names, name))
+            size += match.start() - pos + len(inner or "")
+            if inner is None or size > ENTITY_LIMIT:
+                values[name] = None
+                return None
+            pieces += (text[pos : match.start()], inner)
+            pos = match.end()
+        pieces.append(text[pos:])
+        value = "".join(pieces)
+        values[name] = value if len(value) <= ENTITY_LIMIT else None
+        return values[name]
+
+    def substitute(self, text: str) -> str:
+        """``text`` with each reference to an expanded entity replaced, within the budget."""
+        if not self.escaped or "&" not in text:
+            return text
+        return _ENTITY_REFERENCE.sub(self._one, text)
+
+    def _one(self, match: re.Match[str]) -> str:
+        value = self.escaped.get(match.group(1))
+        if value is None:
+            return match.group()
+        if self.used + len(value) > ENTITY_BUDGET:
+            self.over_budget += 1
+            return match.group()
+        self.used += len(value)
+        return value
+
+
+def _character(match: re.Match[str]) -> str:
+    code = int(match.group(1), 16) if match.group(1) else int(match.group(2))
+    return chr(code) if xml_text.legal(code) else match.group()
+
+
+def _without_comments(text: str) -> str:
+    """``text`` without ``<!-- -->`` comments, in linear time (a regex could backtrack)."""
+    kept: list[str] = []
+    pos = 0
+    while (start := text.find("<!--", pos)) >= 0:
+        kept.append(text[pos:start])
+        end = text.find("-->", start + 4)
+        if end < 0:
+            return "".join(kept)
+        pos = end + 3
+    kept.append(text[pos:])
+    return "".join(kept)
+
+
 _NOT_XML = frozenset({"idna", "punycode", "undefined", "raw_unicode_escape", "unicode_escape"})
 
 
@@ -632,6 +805,9 @@ class _Sanitiser:
         self.in_prolog = True
         self.in_comment = False
         self.doctype = False
+        #: Quoted literals of a DOCTYPE are skipped (an entity's value may hold "<b>"),
+        #: unless one runs longer than PROLOG_LIMIT: then quotes are no longer heeded.
+        self.heed_quotes = True
         self.prolog_lines = 0
         self.illegal = 0
         self.markup = _Markup()
@@ -641,8 +817,10 @@ class _Sanitiser:
         self.carry = ""
         if not final:
             # Keep back a reference, colour code or DTD keyword cut by the chunk boundary.
-            tail = text[-16:]
+            tail = text[-80:]
             held = [m.start() for m in (_OPEN_CHAR_REF.search(tail),) if m is not None]
+            if open_reference := _OPEN_ENTITY_REFERENCE.search(tail):
+                held.append(open_reference.start())
             held += [tail.rfind(mark) for mark in ("\x1b", "<") if mark in tail]
             if held:
                 cut = len(text) - len(tail) + min(held)
@@ -658,7 +836,7 @@ class _Sanitiser:
         if "&#" in text:
             text = _CHAR_REF.sub(self._show_reference, text)
         if self.in_prolog:
-            text, unfinished = self._skip_prolog(text)
+            text, unfinished = self._skip_prolog(text, final)
             self.carry = unfinished + self.carry
         if "<!" in text:
             # Anything DTD-like left (smuggled, late, unterminated) is made inert: the
@@ -710,30 +888,52 @@ class _Sanitiser:
         self.illegal += 1
         return xml_text.shown_code(code)
 
-    def _skip_prolog(self, text: str) -> tuple[str, str]:
+    def _skip_prolog(self, text: str, final: bool = False) -> tuple[str, str]:
         """Drop everything before the root element, streaming: nothing there is needed.
 
         The prolog may only hold the declaration (we re-encode anyway), comments,
         processing instructions and a DOCTYPE, which must never reach the parser: it
-        could define entities (bombs) or point at files and the network. Returns the
-        text from the root element on, and an unfinished tail to look at again.
+        could define entities (bombs) or point at files and the network; its small
+        internal entities are read from the text kept here (:class:`_Entities`). Returns
+        the text from the root element on, and an unfinished tail to look at again.
         """
         index = 0
+        entities = self.markup.entities
         while True:
             if self.in_comment:
                 end = text.find("-->", index)
                 if end < 0:
                     self.prolog_lines += text.count("\n", 0, len(text) - 2)
+                    entities.capture(text[:-2])
                     return "", text[-2:]
                 index, self.in_comment = end + 3, False
                 continue
-            start = text.find("<", index)
+            if self.doctype and self.heed_quotes:
+                mark = _PROLOG_MARK.search(text, index)
+                start = mark.start() if mark else -1
+                if mark and mark.group() != "<":
+                    quote = start
+                    end = text.find(text[quote], quote + 1, quote + 1 + PROLOG_LIMIT)
+                    if end >= 0:
+                        index = end + 1
+                    elif final or len(text) - quote > PROLOG_LIMIT:
+                        # Unterminated: a broken DOCTYPE, read on as if unquoted.
+                        self.heed_quotes, index = False, quote + 1
+                    else:
+                        self.prolog_lines += text.count("\n", 0, quote)
+                        entities.capture(text[:quote])
+                        return "", text[quote:]  # the literal ends in a later chunk
+                    continue
+            else:
+                start = text.find("<", index)
             if start < 0 or start + 1 >= len(text):
                 kept = len(text) if start < 0 else start
                 self.prolog_lines += text.count("\n", 0, kept)
+                entities.capture(text[:kept])
                 return "", text[kept:]
             if len(text) - start < 9 and "<!DOCTYPE".startswith(text[start:]):
                 self.prolog_lines += text.count("\n", 0, start)
+                entities.capture(text[:start])
                 return "", text[start:]  # a keyword cut by the chunk boundary
             if text.startswith("<!--", start):
                 self.in_comment, index = True, start + 4
@@ -741,17 +941,25 @@ class _Sanitiser:
             if text.startswith("<!DOCTYPE", start) and not self.doctype:
                 self.doctype = True
                 self.result.repairs.append(
-                    "a DOCTYPE was removed: DTDs and entities are never loaded or expanded"
+                    "a DOCTYPE was removed: no DTD or external entity is ever loaded"
                 )
-            following = text[start + 1]
-            if following.isalpha() or following in "_:":
+            after = text[start + 1]
+            if after.isalpha() or after in "_:":
                 self.in_prolog = False
+                entities.capture(text[:start])
+                if self.doctype:
+                    self.result.repairs.extend(entities.define())
                 # Keep the line count, so the parser's line numbers match the file's.
                 lines = min(self.prolog_lines + text.count("\n", 0, start), 100_000)
                 return "\n" * lines + text[start:], ""
             index = start + 1
 
     def finish(self) -> None:
+        if self.markup.entities.over_budget:
+            self.result.repairs.append(
+                f"{self.markup.entities.over_budget} entity reference(s) beyond "
+                f"{ENTITY_BUDGET} expanded characters were not expanded"
+            )
         if self.markup.dropped_attributes:
             self.result.problems.append(
                 f"{self.markup.dropped_attributes} attribute(s) beyond the first "

@@ -28,6 +28,8 @@ from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ros_isolated_test.runner.request import RunRequest
     from ros_isolated_test.xunit import reader
 
@@ -57,8 +59,11 @@ class ResultFile:
         self.write_error: str | None = None
         #: The properties the last final word written holds.
         self.written: dict[str, str] = {}
-        # That final word (cases, duration, output, checked), to write it again.
-        self._last: tuple[list[Case], float, str, bool] | None = None
+        #: The suite of that final word: one attempt's result, when a test runs again.
+        self.last_suite: Suite | None = None
+        # How that final word is built from the properties, and whether it is checked,
+        # to write it again.
+        self._last: tuple[Callable[[dict[str, str]], Suite], bool] | None = None
         # Whether adopt() kept the test's own file aside at ``original``.
         self._adopted = False
         # Why the last write failed, in the system's words (No space left on device).
@@ -79,7 +84,40 @@ class ResultFile:
             assert stale is not None
             with contextlib.suppress(FileNotFoundError):
                 _remove(stale)
+        number = 1
+        # Earlier attempts' own files of a run with reruns: one lstat when there are none.
+        while os.path.lexists(stale := self.attempt_original(number)):
+            _remove(stale)
+            number += 1
         self.path.parent.mkdir(parents=True, exist_ok=True)
+
+    def attempt_original(self, number: int) -> Path:
+        """Where the test's own file of attempt ``number`` is kept once a rerun follows."""
+        assert self.path is not None
+        return self.path.with_name(f"{self.path.name}.attempt{number}{ORIGINAL_SUFFIX}")
+
+    def next_attempt(
+        self, finished: int, properties: dict[str, str], merge: Callable[[Suite], Suite]
+    ) -> bool:
+        """Make ready for the test to run again after attempt ``finished``.
+
+        The properties start again from ``properties``; the test's own file of the
+        attempt (``.orig``) is kept as ``.attempt<N>.orig``; the placeholder goes back in
+        place, so a file the rerun writes is told from one it does not, now holding
+        ``merge`` of itself (the attempts so far). False when it cannot be written.
+        """
+        self.properties = dict(properties)
+        self.problems = []
+        if self.path is None:
+            return True
+        assert self.original is not None
+        if self._adopted:
+            self._adopted = False
+            try:
+                os.replace(self.original, self.attempt_original(finished))
+            except OSError as error:
+                _say(f"cannot keep the test's own file of attempt {finished}: {_reason(error)}")
+        return self.write_placeholder(merge)
 
     def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
         """The test as one case, for a test that wrote no result of its own."""
@@ -117,12 +155,37 @@ class ResultFile:
         """
         if self.path is None:
             return None
+
+        def build(properties: dict[str, str]) -> Suite:
+            return self._suite(cases, duration, properties, output)
+
+        return self._final(build, checked)
+
+    def write_merged(self, merged: Suite) -> validate.Rendered | None:
+        """Write the suite of every attempt of a test run more than once, checked.
+
+        Properties added since (why a rerun did not run, a late signal) join its own.
+        """
+        if self.path is None:
+            return None
+
+        def build(properties: dict[str, str]) -> Suite:
+            for name, value in properties.items():
+                merged.properties.setdefault(name, shown(value))
+            return merged
+
+        return self._final(build, checked=True)
+
+    def _final(
+        self, build: Callable[[dict[str, str]], Suite], checked: bool
+    ) -> validate.Rendered | None:
         properties = dict(self.properties)
-        rendered = validate.render(self._suite(cases, duration, properties, output), checked)
+        suite = build(properties)
+        rendered = validate.render(suite, checked)
         if self._write(rendered.data):
-            self.written, self._last = properties, (cases, duration, output, checked)
+            self.written, self._last, self.last_suite = properties, (build, checked), suite
             return rendered
-        self._leave_word(cases, duration)
+        self._leave_word(suite.cases, suite.time)
         return None
 
     def rewrite(self) -> None:
@@ -132,9 +195,9 @@ class ResultFile:
         """
         if self.path is None or self._last is None:
             return
-        cases, duration, output, checked = self._last
+        build, checked = self._last
         properties = dict(self.properties)
-        suite = self._suite(cases, duration, properties, output)
+        suite = build(properties)
         try:
             write_atomically(self.path, validate.render(suite, checked).data)
         except OSError as error:
@@ -142,12 +205,13 @@ class ResultFile:
             return
         self.written = properties
 
-    def write_placeholder(self) -> bool:
+    def write_placeholder(self, merge: Callable[[Suite], Suite] | None = None) -> bool:
         """What ctest leaves behind if it kills the runner: the test did not finish.
 
         It ends in a comment holding ``RESERVE_BYTES`` of room: should the final write
         fail, the stand-in overwrites it in place, in blocks already allocated. False
         when it could not be written (the error is on stderr, ``write_error`` says it).
+        ``merge``: for a rerun, what puts the earlier attempts beside it.
         """
         if self.path is None:
             return True
@@ -157,6 +221,8 @@ class ResultFile:
             "the test most likely timed out."
         )
         suite = self._suite([self.case(Outcome.ERROR, message)], 0.0, dict(self.properties))
+        if merge is not None:
+            suite = merge(suite)
         note = "<!-- room for the runner to say what happened if it cannot replace this file"
         padding = f"{note}{' ' * max(RESERVE_BYTES - len(note) - 5, 0)} -->\n"
         data = serialise.serialize(suite) + padding.encode()

@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from ros_isolated_test import __version__
-from ros_isolated_test.xunit.model import Case, Outcome, Suite
+from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT, kept
+from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
 
 DECLARATION = "<?xml version='1.0' encoding='UTF-8'?>\n"
@@ -58,6 +59,39 @@ def _output(lines: list[str], indent: str, out: str, err: str) -> None:
             lines.append(f"{indent}<{tag}>{text(safe)}</{tag}>\n")
 
 
+def _attempt(lines: list[str], attempt: Attempt) -> None:
+    """An earlier attempt, as Surefire writes it: the text in ``<stackTrace>``.
+
+    junit-10 requires ``type``: a producer that gave none gets the outcome's name.
+    """
+    message = xml_safe(attempt.message, ATTEMPT_TEXT_LIMIT)
+    fallback = "error" if attempt.kind.endswith("Error") else "failure"
+    head = _start(
+        attempt.kind, (("message", message), ("type", name_token(attempt.type, fallback, 256)))
+    )
+    body: list[str] = []
+    trace = xml_safe(attempt.text, ATTEMPT_TEXT_LIMIT) or message
+    for tag, value in (
+        ("stackTrace", trace),
+        ("system-out", xml_safe(attempt.system_out, ATTEMPT_TEXT_LIMIT)),
+        ("system-err", xml_safe(attempt.system_err, ATTEMPT_TEXT_LIMIT)),
+    ):
+        if value.strip():
+            body.append(f"        <{tag}>{text(value)}</{tag}>\n")
+    if body:
+        lines.extend((f"      {head}>\n", *body, f"      </{attempt.kind}>\n"))
+    else:
+        lines.append(f"      {head}/>\n")
+
+
+def flaky_note(system_out: str, failed: int) -> str:
+    """A flaky pass's output, opened by one line saying so (once, however often re-read)."""
+    note = f"Passed after {failed} failed attempt(s); each is recorded below."
+    if system_out.startswith(note):
+        return system_out
+    return f"{note}\n{system_out}" if system_out.strip() else note
+
+
 def _case(lines: list[str], case: Case) -> None:
     head = _start(
         "testcase",
@@ -79,7 +113,17 @@ def _case(lines: list[str], case: Case) -> None:
         body.append(
             f"      {outcome}>{text(content)}</{tag}>\n" if content else f"      {outcome}/>\n"
         )
-    _output(body, "      ", case.system_out, case.system_err)
+    attempts = kept(case.attempts)
+    if case.outcome is Outcome.PASSED and attempts:
+        # The output first: xunit-viewer takes a case's status from its first child.
+        _output(body, "      ", flaky_note(case.system_out, len(case.attempts)), "")
+        for attempt in attempts:
+            _attempt(body, attempt)
+        _output(body, "      ", "", case.system_err)
+    else:
+        for attempt in attempts:
+            _attempt(body, attempt)
+        _output(body, "      ", case.system_out, case.system_err)
     if body:
         lines.extend((f"    {head}>\n", *body, "    </testcase>\n"))
     else:

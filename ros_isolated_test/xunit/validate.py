@@ -13,6 +13,7 @@ import os
 import time
 
 from ros_isolated_test.xunit import serialise
+from ros_isolated_test.xunit.attempts import FLAKY_PROPERTY
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import name_token
 
@@ -32,7 +33,10 @@ def hostname() -> str:
 
 
 def problems(root: etree._Element) -> list[str]:
-    """Why a tree is not canonical: schema errors, then counts that disagree with cases."""
+    """Why a tree is not canonical: schema errors, then counts that disagree with cases.
+
+    The counts include the ``flaky_cases`` property a merge of attempts writes.
+    """
     from ros_isolated_test.schemas import junit_schema
 
     schema = junit_schema()
@@ -51,6 +55,17 @@ def problems(root: etree._Element) -> list[str]:
             if suite.get(key) != str(value):
                 found.append(
                     f"suite {suite.get('name')}: {key}={suite.get(key)}, cases say {value}"
+                )
+        flaky = sum(
+            1
+            for case in cases
+            if case.find("flakyFailure") is not None or case.find("flakyError") is not None
+        )
+        for prop in suite.iterfind(f"properties/property[@name='{FLAKY_PROPERTY}']"):
+            if prop.get("value") != str(flaky):
+                found.append(
+                    f"suite {suite.get('name')}: property {FLAKY_PROPERTY}={prop.get('value')},"
+                    f" cases say {flaky}"
                 )
     return found
 
@@ -127,5 +142,9 @@ def _internal_error(suite: Suite, found: list[str]) -> Suite:
         time=suite.time,
         timestamp=timestamp(),
         hostname=hostname(),
-        properties={key: value for key, value in suite.properties.items() if key and value},
+        properties={
+            key: value
+            for key, value in suite.properties.items()
+            if key and value and key != FLAKY_PROPERTY
+        },
     )

@@ -6,7 +6,8 @@ processes (child processes of a test), workspace (the example colcon package, bu
 per session), cmake_package and launch_env (the CMake package's and the launch tier's
 builds), peak_rss (a child's memory, never charged with pytest's), distros (the Jazzy and
 Kilted venvs, and the environment a sourced setup of each gives), overlap (runners started
-at once, proving no two held one ID), capabilities (the only way to skip). Test modules
+at once, proving no two held one ID), readers (how colcon, xunit-viewer, junitparser,
+GitLab and Jenkins read a result file), capabilities (the only way to skip). Test modules
 import from here, never from each other and never from ``conftest``, which holds fixtures
 only. The other ``*.py`` here are programs the tests run as processes (talkers,
 listeners).

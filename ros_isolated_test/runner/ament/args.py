@@ -23,7 +23,9 @@ EPILOG = (
     "Set DISABLE_ROS_ISOLATION=1 (in the environment, or with --env / ament_add_test's ENV) "
     "to run without a reserved domain ID. Also read: ROS_ISOLATED_TEST_DOMAINS, "
     "ROS_ISOLATED_TEST_LOCK_DIR, ROS_ISOLATED_TEST_WAIT_TIMEOUT, "
-    "ROS_ISOLATED_TEST_DISCOVERY_RANGE (see ros-isolated-test run --help)."
+    "ROS_ISOLATED_TEST_DISCOVERY_RANGE (see ros-isolated-test run --help), and "
+    "ROS_ISOLATED_TEST_RERUNS=N (also in --env / ENV, which wins): run a failed test again "
+    "up to N times, keeping every attempt in the result file."
 )
 
 #: run_test.py's options: (name, metavar or None for a flag, repeats, help). No argparse:
@@ -172,6 +174,19 @@ def _assignments(values: Sequence[str], option: str, append: bool) -> list[EnvAs
     return merged
 
 
+def _reruns_of(env: Sequence[EnvAssignment]) -> int | None:
+    """ROS_ISOLATED_TEST_RERUNS as the test's ``--env`` sets it last; None: not set there.
+
+    ament_add_test's ENV reaches the runner only as ``--env``: the CMake macros' RERUNS
+    argument is passed that way, and like DISABLE_ROS_ISOLATION it has the last word.
+    """
+    found = [item for item in env if item.name == settings.RERUNS_ENV and not item.append]
+    if not found:
+        return None
+    value = found[-1].value
+    return settings.reruns_from(value, f"--env {settings.RERUNS_ENV}") if value.strip() else 0
+
+
 def _guess_result_file(argv: Sequence[str]) -> Path | None:
     """The result file, to report a usage error in it: ament always passes it first."""
     if argv and not argv[0].startswith("-"):
@@ -210,8 +225,9 @@ def parse(argv: Sequence[str]) -> RunRequest:
         return RunRequest(
             command=tuple(command),
             mode=Mode.AMENT,
-            # RUNNER mode has no options of its own for these: the environment only.
-            settings=settings.read(),
+            # RUNNER mode has no options of its own for these: the environment only, and
+            # for reruns the test's ENV too (ament_add_test(... ENV ROS_ISOLATED_TEST_RERUNS=2)).
+            settings=settings.read(reruns=_reruns_of(env)),
             result_file=result_file,
             package_name=single.get("--package-name"),
             output_file=Path(single["--output-file"]) if "--output-file" in single else None,
