@@ -22,6 +22,7 @@ from helpers import capabilities
 from helpers.commands import CLI
 from helpers.domains import free_ids
 from helpers.processes import DEADLINE, Children, wait_for
+from helpers.tiny_disk import run_on_tiny_disk
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator, participants
 from ros_isolated_test.domain_coordinator.block import block_marker
@@ -63,34 +64,149 @@ while not Path(sys.argv[2]).exists() and time.monotonic() < deadline:
 """
 
 
-def _touch(path: Path, when: float) -> None:
+def _made_after(path: Path, earlier: Path | None, owner: int | None = None) -> None:
+    """Create ``path`` (owned by ``owner``), its change time after ``earlier``'s.
+
+    A coarse file clock can give both one time: touched again until it moves on.
+    """
     path.write_text("")
-    os.utime(path, (when, when))
+    if owner is not None:
+        os.chown(path, owner, owner)
+    while earlier is not None and os.stat(path).st_ctime <= os.stat(earlier).st_ctime:
+        time.sleep(0.005)
+        os.utime(path)
 
 
 @pytest.mark.parametrize(
-    ("record", "release", "expected"),
+    ("events", "expected"),
     [
-        (None, None, False),  # a fresh ID
-        (None, 1000.0, False),  # released cleanly: its record is gone
-        (1000.0, None, True),  # a record and no release since: the holder died
-        (1000.0, 2000.0, False),  # a later holder released the ID since
-        (2000.0, 1000.0, True),  # died after the last release
-        (1000.0, 1000.0, True),  # a coarse clock cannot tell: look
+        ((), False),  # a fresh ID
+        (("release",), False),  # released cleanly: its record is gone
+        (("record",), True),  # a record and no release since: the holder died
+        (("record", "release"), False),  # a later holder released the ID since
+        (("release", "record"), True),  # died after the last release
     ],
 )
 def test_died_holding_compares_the_record_with_the_last_release(
-    lock_dir: Path, record: float | None, release: float | None, expected: bool
+    lock_dir: Path, events: tuple[str, ...], expected: bool
 ) -> None:
     (domain_id,) = free_ids(1)
     lock_dir.mkdir(exist_ok=True)
-    if record is not None:
-        _touch(record_path(lock_dir, domain_id, uid=12345), record)
-    if release is not None:
-        _touch(release_stamp(lock_dir, domain_id), release)
+    paths = {
+        "record": record_path(lock_dir, domain_id),
+        "release": release_stamp(lock_dir, domain_id),
+    }
+    earlier: Path | None = None
+    for event in events:
+        _made_after(paths[event], earlier)
+        earlier = paths[event]
     assert died_holding(lock_dir, domain_id) is expected
     # Another ID's files say nothing about this one.
     assert not died_holding(lock_dir, domain_id + 1 if domain_id < 232 else 1)
+
+
+def test_a_future_time_set_on_a_release_stamp_does_not_clear_a_record(lock_dir: Path) -> None:
+    """utime sets any modification time; the change time it cannot set is what counts."""
+    (domain_id,) = free_ids(1)
+    lock_dir.mkdir(exist_ok=True)
+    stamp, record = release_stamp(lock_dir, domain_id), record_path(lock_dir, domain_id)
+    _made_after(stamp, None)
+    _made_after(record, stamp)
+    year_2100 = 4102444800.0
+    os.utime(stamp, (year_2100, year_2100))
+    assert died_holding(lock_dir, domain_id)
+    # The control: a release after the record clears it.
+    os.utime(stamp)
+    _made_after(stamp, record)
+    assert not died_holding(lock_dir, domain_id)
+
+
+@capabilities.ROOT
+@pytest.mark.parametrize(
+    ("stamp_owner", "expected"),
+    [(4243, True), (4242, False), (0, False)],
+    ids=["another-user", "the-same-user", "root"],
+)
+def test_only_a_release_by_the_dead_holders_user_or_root_clears_its_record(
+    lock_dir: Path, stamp_owner: int, expected: bool
+) -> None:
+    """Another user's look could not read that holder's processes' environments."""
+    (domain_id,) = free_ids(1)
+    lock_dir.mkdir(exist_ok=True)
+    record = record_path(lock_dir, domain_id, uid=4242)
+    _made_after(record, None, owner=4242)
+    _made_after(lock_dir / f"domain-{domain_id}.uid{stamp_owner}.released", record, stamp_owner)
+    assert died_holding(lock_dir, domain_id) is expected
+
+
+#: On a tiny disk: hold an ID, fill the disk (argv[3] "full") or not, record survivors,
+#: release; print whether the block was written and whether the next holder will look.
+BLOCK_ON_A_FULL_DISK = """
+import os, subprocess, sys
+from pathlib import Path
+from ros_isolated_test.domain_coordinator import DomainCoordinator
+from ros_isolated_test.domain_coordinator.escaped import died_holding
+from ros_isolated_test.process import proc
+lock_dir, domain_id = Path(sys.argv[1]), int(sys.argv[2])
+reservation = DomainCoordinator(lock_dir, (domain_id,)).try_reserve(["t"])
+assert reservation is not None
+if sys.argv[3] == "full":
+    subprocess.run(["dd", "if=/dev/zero", f"of={lock_dir.parent}/filler", "bs=1k"],
+                   stderr=subprocess.DEVNULL)
+try:
+    reservation.block_for([proc.read_stat(os.getpid())])
+    blocked = "blocked"
+except OSError:
+    blocked = "not-blocked"
+reservation.release()
+print(blocked, "look" if died_holding(lock_dir, domain_id) else "no-look", flush=True)
+"""
+
+
+@capabilities.MOUNT_NAMESPACE
+@pytest.mark.parametrize(
+    ("disk", "expected"), [("full", "not-blocked look"), ("room", "blocked no-look")]
+)
+def test_survivors_that_cannot_be_recorded_leave_the_release_unclean(
+    tmp_path: Path, env: dict[str, str], disk: str, expected: str
+) -> None:
+    """No block record names them, so the next holder must look for them in /proc.
+
+    The control has room for the block record: the release is clean, the block does it.
+    """
+    (domain_id,) = free_ids(1)
+    mount = tmp_path / "disk"
+    argv = [sys.executable, "-c", BLOCK_ON_A_FULL_DISK, str(mount / "locks"), str(domain_id), disk]
+    done = run_on_tiny_disk(mount, argv, env, size="256k")
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    assert done.stdout.decode().split() == expected.split()
+
+
+@capabilities.ROOT
+def test_a_file_planted_at_the_record_path_leaves_a_record_of_our_own_name(lock_dir: Path) -> None:
+    """Should this holder die, a record of its own still says it held the ID."""
+    (domain_id,) = free_ids(1)
+    lock_dir.mkdir(exist_ok=True)
+    planted = record_path(lock_dir, domain_id)
+    planted.write_text("planted")
+    os.chown(planted, 4242, 4242)
+    os.utime(planted, (1000.0, 1000.0))
+    reservation = DomainCoordinator(lock_dir, (domain_id,)).try_reserve(["x"])
+    assert reservation is not None and reservation.record is not None
+    assert reservation.record != planted
+    assert reservation.record.name.endswith(".holder.json")
+    assert reservation.record.stat().st_uid == os.getuid()
+    # Dying now (the descriptors closed, nothing removed): the next holder looks.
+    reservation.port.close()
+    if reservation.lock_fd is not None:
+        os.close(reservation.lock_fd)
+    assert died_holding(lock_dir, domain_id)
+    # The control: a holder that releases removes its own record; the planted one stays.
+    again = DomainCoordinator(lock_dir, (domain_id,)).try_reserve(["x"])
+    assert again is not None and again.record is not None
+    again_record = again.record
+    again.release()
+    assert not again_record.exists() and planted.exists()
 
 
 def test_a_process_left_by_a_holder_that_died_holding_blocks_its_id(

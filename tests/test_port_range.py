@@ -185,7 +185,8 @@ def test_an_explicit_pool_in_the_range_is_used_with_one_warning(
     assert warnings == [
         f"WARNING: {POOL_ENV} names ID {chosen} whose DDS ports fall in this host's ephemeral "
         "port range 20000-60999 (net.ipv4.ip_local_port_range): another program's connection "
-        "can take such a port and break discovery on that ID; used as given"
+        "can take such a port and break discovery on that ID; used as given (IDs clear of "
+        "it: 1-50, 215-232)"
     ], done.stdout
 
 

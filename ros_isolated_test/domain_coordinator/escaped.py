@@ -5,8 +5,9 @@ not end are named in a block record), so after a clean release nothing of the te
 can still talk on the ID. Only a holder that died holding the ID (SIGKILL, a crash,
 the machine's OOM killer) may have left processes behind, and it says so by what it
 did not do: its holder record, written when it took the ID and removed when it lets
-go, is still in the lock directory, newer than any release of the ID. For such an ID,
-and only for it, the coordinator scans ``/proc`` for processes carrying it in
+go, is still in the lock directory, newer than any release of the ID by its user (a
+runner that could not record its test's survivors leaves it the same way). For such an
+ID, and only for it, the coordinator scans ``/proc`` for processes carrying it in
 ROS_DOMAIN_ID (a cost that grows with the machine's processes); what the scan finds is
 written down as a block record, so the runners after it check those processes by PID
 instead of scanning again. Every other reservation costs no look at other processes.
@@ -27,14 +28,18 @@ def died_holding(lock_dir: Path, domain_id: int) -> bool:
     """Whether a holder of the ID left its record behind: it died without releasing.
 
     Call it while holding the ID (lock and port): no live runner can hold it then, so
-    every record of the ID is a dead holder's. A record no newer than the ID's last
-    release was left by a holder whose successor has since run and released cleanly
-    (it looked, see :func:`escaped_processes`); an equal time counts as newer, so a
-    coarse file clock errs on the side of looking. Anything with a record's name
-    counts, whoever planted it: a planted file costs a scan, never an ID.
+    every record of the ID is a dead holder's. A record counts as dealt with once a
+    release of the ID came after it by its own user or by root, the users whose look
+    (see :func:`escaped_processes`) could see that holder's processes: another user
+    cannot read their environments. Times are change times, which no one can set back
+    or forward with utime, so a planted stamp cannot clear a record; an equal time
+    counts as later for the record, so a coarse file clock errs on the side of looking.
+    Anything with a record's name counts, whoever planted it: a planted file costs a
+    scan, never an ID.
     """
     prefix = f"domain-{domain_id}."
-    recorded = released = 0.0
+    records: list[tuple[int, float]] = []
+    released: dict[int, float] = {}
     with contextlib.suppress(OSError):
         for entry in os.scandir(lock_dir):
             name = entry.name
@@ -44,14 +49,14 @@ def died_holding(lock_dir: Path, domain_id: int) -> bool:
             if not is_record and not name.endswith(".released"):
                 continue
             try:
-                mtime = entry.stat(follow_symlinks=False).st_mtime
+                info = entry.stat(follow_symlinks=False)
             except OSError:
                 continue
             if is_record:
-                recorded = max(recorded, mtime or 1.0)
+                records.append((info.st_uid, info.st_ctime))
             else:
-                released = max(released, mtime)
-    return recorded > 0.0 and recorded >= released
+                released[info.st_uid] = max(released.get(info.st_uid, 0.0), info.st_ctime)
+    return any(max(released.get(uid, 0.0), released.get(0, 0.0)) <= when for uid, when in records)
 
 
 def escaped_processes(lock_dir: Path, domain_id: int) -> list[squatters.Squatter]:

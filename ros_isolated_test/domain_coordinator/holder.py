@@ -196,24 +196,38 @@ def mark_held(lock_dir: Path, domain_id: int) -> Path | None:
     """The user's record for the ID as an empty file, when a full one cannot be written.
 
     On a full disk a file with no data still fits: its name and time alone tell the
-    next holder that this one took the ID (``escaped``). None when even that fails.
+    next holder that this one took the ID (``escaped``). When another user planted a
+    file at the record's path, a record of a name of our own (never guessed) takes its
+    place. None when nothing can be written.
     """
-    path = record_path(lock_dir, domain_id)
     flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    own = f"domain-{domain_id}.uid{os.getuid()}.{os.getpid()}-{os.urandom(4).hex()}.holder.json"
+    for path, extra in ((record_path(lock_dir, domain_id), 0), (lock_dir / own, os.O_EXCL)):
+        try:
+            fd = os.open(path, flags | extra, 0o644)
+        except OSError:
+            continue
+        try:
+            info = os.fstat(fd)
+            if stat.S_ISREG(info.st_mode) and info.st_uid == os.getuid():
+                os.utime(fd)
+                return path
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+    return None
+
+
+def refresh(path: Path) -> bool:
+    """Touch our record, so it is newer than any release: False when it is gone or not ours."""
+    if not owned_file(path):
+        return False
     try:
-        fd = os.open(path, flags, 0o644)
+        os.utime(path, follow_symlinks=False)
     except OSError:
-        return None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode) or info.st_uid != os.getuid():
-            return None
-        os.utime(fd)
-    except OSError:
-        return None
-    finally:
-        os.close(fd)
-    return path
+        return False
+    return True
 
 
 def read_records(lock_dir: Path, domain_id: int) -> list[Holder]:

@@ -175,7 +175,8 @@ def explicit_warnings(ids: Sequence[int], port_range: tuple[int, int]) -> tuple[
     return (
         f"WARNING: {POOL_ENV} names {_ids(clashing)} whose DDS ports fall in "
         f"{_range_text(port_range)}: another program's connection can take such a port and "
-        "break discovery on that ID; used as given",
+        f"break discovery on that ID; used as given (IDs clear of it: "
+        f"{_clear_ids(port_range) or 'none'})",
     )
 
 

@@ -78,7 +78,7 @@ if TYPE_CHECKING:
 class Reservation:
     """A held domain ID. Release it with :meth:`release` (or leave the ``with`` block)."""
 
-    __slots__ = ("domain_id", "lock_dir", "lock_fd", "port", "record", "released")
+    __slots__ = ("domain_id", "lock_dir", "lock_fd", "port", "record", "released", "unclean")
 
     def __init__(
         self,
@@ -95,6 +95,9 @@ class Reservation:
         self.record = record
         self.lock_dir = lock_dir
         self.released = False
+        #: Set when survivors could not be recorded: the release then says nothing is left
+        #: of the test only if that is true (see :meth:`release`).
+        self.unclean = False
 
     def __repr__(self) -> str:
         return f"Reservation(domain_id={self.domain_id}, released={self.released})"
@@ -106,13 +109,28 @@ class Reservation:
         :meth:`release`, while no other runner can take the ID. Raises OSError when the
         block cannot be recorded.
         """
-        return write_block(self.lock_dir, self.domain_id, processes)
+        try:
+            return write_block(self.lock_dir, self.domain_id, processes)
+        except OSError:
+            self.unclean = True
+            raise
 
     def release(self) -> None:
-        """Give the ID back: record first, so ``status`` never names a holder that left."""
+        """Give the ID back: record first, so ``status`` never names a holder that left.
+
+        A clean release (record removed, stamp touched) tells the next holder nothing
+        of the test is left. When survivors live that no block record names (it could
+        not be written), the record stays, refreshed, and no stamp is touched: the next
+        holder then looks for them in /proc, as after a holder that died holding the ID.
+        """
         if self.released:
             return
         self.released = True
+        if self.unclean:
+            if self.record is None or not holder.refresh(self.record):
+                holder.mark_held(self.lock_dir, self.domain_id)
+            self._let_go()
+            return
         if self.record is not None:
             holder.remove_record(self.record)
         with contextlib.suppress(OSError):
@@ -126,6 +144,9 @@ class Reservation:
                     os.utime(fd)
             finally:
                 os.close(fd)
+        self._let_go()
+
+    def _let_go(self) -> None:
         self.port.close()
         if self.lock_fd is not None:
             os.close(self.lock_fd)
@@ -307,6 +328,15 @@ class DomainCoordinator:
                     except OSError:
                         # An empty record, if even that: it still says "held" should we die.
                         record = holder.mark_held(self.lock_dir, domain_id)
+                    if record is None:
+                        port.close()
+                        if lock_fd is not None:
+                            os.close(lock_fd)
+                        raise LockDirError(
+                            f"cannot record the holder of ROS_DOMAIN_ID {domain_id} in "
+                            f"{self.lock_dir} (a runner that dies must leave that trace); free "
+                            "space there, or point ROS_ISOLATED_TEST_LOCK_DIR elsewhere"
+                        )
                     return Reservation(domain_id, lock_fd, port, record, self.lock_dir)
                 port.close()
             if lock_fd is not None:
