@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import random
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from helpers import capabilities, jenkins_junit10
@@ -21,11 +22,13 @@ from ros_isolated_test.xunit.attempts import (
     ABSENT,
     ATTEMPT_TEXT_LIMIT,
     ATTEMPTS_KEPT,
+    RENAMED_PROPERTY,
     for_outcome,
     kept,
     merge_attempts,
 )
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
+from ros_isolated_test.xunit.result_file import normalise_file
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT
 
 CLASS = "pkg.C"
@@ -432,6 +435,78 @@ def test_a_hundred_reruns_of_huge_output_cost_about_ten() -> None:
     assert hundred < ten * 1.05
     # Ten attempts cost at most about the final outcome's own text and output (3 x 64 KiB).
     assert ten < 2 * 3 * TEXT_LIMIT + 3 * ATTEMPTS_KEPT * ATTEMPT_TEXT_LIMIT
+
+
+def _testcases(data: bytes) -> list[bytes]:
+    return [etree.tostring(node) for node in _parse(data).iter("testcase")]
+
+
+@pytest.mark.parametrize("final", [Outcome.PASSED, Outcome.FAILURE])
+@pytest.mark.parametrize("count", [2, ATTEMPTS_KEPT + 2, 50])
+def test_a_canonical_file_normalised_again_keeps_its_cases(
+    tmp_path: Path, count: int, final: Outcome
+) -> None:
+    """What ``ros-isolated-test normalise`` does to a file the runner wrote: nothing."""
+    last = _passed() if final is Outcome.PASSED else _failed(message="last")
+    history = [_suite([_failed(message=f"attempt {n}")]) for n in range(1, count)]
+    canonical = serialise.serialize(merge_attempts([*history, _suite([last])]))
+    source = tmp_path / "canonical.xml"
+    written = canonical
+    for _ in range(2):
+        source.write_bytes(written)
+        again, _ = normalise_file(source, "pkg", "test")
+        assert _testcases(again) == _testcases(canonical)
+        written = again
+    node = _case(_parse(canonical), "a")
+    assert len(_attempts(node)) == min(count - 1, ATTEMPTS_KEPT)
+    if final is Outcome.PASSED:
+        # The note says how many failed and, when some were cut, which are shown.
+        shown = "each is" if count - 1 <= ATTEMPTS_KEPT else "the first 5 and the last 5 are"
+        note = f"Passed after {count - 1} failed attempt(s); {shown} recorded below."
+        assert node.findtext("system-out") == note
+
+
+def test_a_gitlab_type_with_edge_spaces_is_caught_when_merged_as_an_attempt() -> None:
+    """A canonical ``<failure type=" symbol">`` becomes an attempt, written trimmed."""
+    first = _failed()
+    first.type = " symbol"
+    root = _written(merge_attempts([_suite([first]), _suite([_passed()])]))
+    [attempt] = _attempts(_case(root, "a"))
+    assert attempt.get("type") == "symbol (producer type)"
+    alone = _case(_written(_suite([first])), "a").find("failure")
+    assert alone is not None
+    assert alone.get("type") == "symbol (producer type)"
+    # Control: a type GitLab leaves alone is written as given, trimmed.
+    first.type = " AssertionError "
+    root = _written(merge_attempts([_suite([first]), _suite([_passed()])]))
+    assert [node.get("type") for node in _attempts(_case(root, "a"))] == ["AssertionError"]
+
+
+def _gitlab_keys(root: etree._Element) -> list[str]:
+    return [
+        f"{suite.get('name')}_{node.get('classname')}_{node.get('name')}"
+        for suite in root.iter("testsuite")
+        for node in suite.iter("testcase")
+    ]
+
+
+def test_cases_of_different_attempts_never_share_a_gitlab_key() -> None:
+    """(pkg.a, b_c) only in attempt 1 and (pkg.a_b, c) in the last are two cases."""
+    failing = Case("pkg.a", "b_c", outcome=Outcome.FAILURE, message="m", text="t", type="E")
+    last = _suite([Case("pkg.a_b", "c")])
+    merged = merge_attempts([_suite([failing, Case("pkg.a_b", "c")]), last])
+    assert [(case.classname, case.name) for case in merged.cases] == [
+        ("pkg.a_b", "c"),
+        ("pkg.a", "b_c [2]"),
+    ]
+    keys = _gitlab_keys(_written(merged))
+    assert len(set(keys)) == len(keys) == 2
+    assert "renamed" in merged.properties[RENAMED_PROPERTY]
+    # Control: cases whose keys differ keep their names and the merge reports nothing.
+    other = Case("pkg.a", "b", outcome=Outcome.FAILURE, message="m", text="t", type="E")
+    merged = merge_attempts([_suite([other]), last])
+    assert [case.name for case in merged.cases] == ["c", "b"]
+    assert RENAMED_PROPERTY not in merged.properties
 
 
 def test_kept_leaves_a_short_list_alone() -> None:

@@ -162,6 +162,23 @@ def test_other_types_pass_through(tmp_path: Path, kind: str) -> None:
     assert "GitLab" not in repairs(result)
 
 
+@pytest.mark.parametrize("tag", ["failure", "flakyFailure", "rerunError"])
+@pytest.mark.parametrize("kind", [" yaml", "symbol ", "  date\t"])
+def test_types_gitlab_converts_are_caught_as_written_not_as_given(
+    tmp_path: Path, tag: str, kind: str
+) -> None:
+    """Names are written trimmed: the converter's check must see the trimmed value."""
+    data = suite(
+        f'<testcase classname="C" name="t"><{tag} message="went wrong" type="{kind}">'
+        f"not a date</{tag}></testcase>"
+    )
+    result, _ = canonical_of(tmp_path, data)
+    assert gitlab_converter_refuses(result.root) == []
+    [node] = [child for child in result.element("t") if child.get("message") == "went wrong"]
+    assert node.get("type") == f"{kind.strip()} (producer type)"
+    assert f"GitLab's XML converter would act on ({kind.strip()})" in repairs(result)
+
+
 # --- a DOCTYPE with small internal entities -----------------------------------------------
 
 ENTITIES = """<!DOCTYPE testsuites [
@@ -251,6 +268,45 @@ def test_entity_reference_cut_by_a_chunk_boundary_is_expanded(tmp_path: Path) ->
     result, _ = canonical_of(tmp_path, data)
     assert result.counts == (1, 1, 0, 0)
     assert result.case("t").text.endswith("expected 1, got 2")
+
+
+def _entity_case(tmp_path: Path, subset: str, message: str) -> Canonical:
+    head = f"{DECLARATION}<!DOCTYPE x [{subset}]>"
+    data = suite(
+        f'<testcase classname="C" name="a"><failure message="{message}">t</failure></testcase>',
+        head=head,
+    )
+    return canonical_of(tmp_path, data)[0]
+
+
+HIDING_PLACES = {
+    "parameter entity": "<!ENTITY % pe \"<!ENTITY hidden 'H'>\">",
+    "another entity's literal": "<!ENTITY outer \"<!ENTITY hidden 'H'>\">",
+    "processing instruction": "<?pi <!ENTITY hidden 'H'> ?>",
+    "comment": "<!-- <!ENTITY hidden 'H'> -->",
+}
+
+
+@pytest.mark.parametrize("place", sorted(HIDING_PLACES))
+def test_a_declaration_inside_other_markup_defines_nothing(tmp_path: Path, place: str) -> None:
+    subset = HIDING_PLACES[place] + '<!ENTITY shown "S">'
+    # Control: the top-level declaration beside it is read.
+    assert _entity_case(tmp_path, subset, "&shown;").case("a").message == "S"
+    hidden = _entity_case(tmp_path, subset, "&hidden;")
+    assert "Entity 'hidden' not defined" in hidden.case("result file").message
+
+
+def test_an_entity_whose_literal_holds_a_declaration_is_that_text(tmp_path: Path) -> None:
+    subset = "<!ENTITY outer \"<!ENTITY hidden 'H'>\">"
+    assert _entity_case(tmp_path, subset, "&outer;").case("a").message == "<!ENTITY hidden 'H'>"
+
+
+def test_the_predefined_entities_are_never_redefined(tmp_path: Path) -> None:
+    subset = "".join(f'<!ENTITY {name} "X">' for name in ("lt", "gt", "amp", "quot", "apos"))
+    subset += '<!ENTITY mine "M">'
+    message = "a &lt; b &gt; c &amp; &quot;d&quot; &apos;e&apos; &mine;"
+    result = _entity_case(tmp_path, subset, message)
+    assert result.case("a").message == "a < b > c & \"d\" 'e' M"
 
 
 # --- counts a producer claims but shows in no case ----------------------------------------

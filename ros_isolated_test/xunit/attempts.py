@@ -9,6 +9,8 @@ hundred reruns cost a result file about as much as ten.
 
 from __future__ import annotations
 
+import re
+
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 
 TYPE_CHECKING = False
@@ -19,11 +21,16 @@ if TYPE_CHECKING:
 ATTEMPTS_PROPERTY = "attempts"
 #: Suite property: how many cases passed (or were skipped) after failing at least once.
 FLAKY_PROPERTY = "flaky_cases"
+#: Suite property: which cases were renamed so no two share a GitLab key (if any were).
+RENAMED_PROPERTY = "renamed_cases"
 #: Earlier attempts kept per case: the oldest half and the newest half, the middle counted.
 ATTEMPTS_KEPT = 10
 #: Characters kept of each attempt's message, text, system-out and system-err: the final
 #: outcome keeps 64 KiB of each, so ten attempts cost about as much as the case itself.
 ATTEMPT_TEXT_LIMIT = 8 * 1024
+#: How :func:`kept` says, at the start of the first attempt after the cut, how many it cut.
+CUT_NOTE = "[... {cut} more attempt(s) not kept ...]"
+_CUT_NOTE = re.compile(r"^\[\.\.\. ([0-9]{1,9}) more attempt\(s\) not kept \.\.\.\]")
 #: How a case of an earlier attempt that the last attempt no longer has is kept (skipped).
 ABSENT = "Not in the last attempt ({total} of {total}): last seen in attempt {seen}, {outcome}."
 
@@ -37,7 +44,9 @@ def merge_attempts(attempts: Sequence[Suite]) -> Suite:
     and a case that did not run there neither passed nor failed. Counts are the cases',
     so a flaky pass counts as passed. Properties are the last attempt's, plus
     ``attempts``, ``flaky_cases`` and ``attempt_<k>.<name>`` for each property an earlier
-    attempt ``k`` had with another value (its domain ID, exit code, duration).
+    attempt ``k`` had with another value (its domain ID, exit code, duration). Cases
+    of different attempts whose GitLab keys collide are renamed as ``normalise`` renames
+    one file's, said in ``renamed_cases``.
     """
     if not attempts:
         raise ValueError("merge_attempts needs the suite of at least one attempt")
@@ -54,6 +63,11 @@ def merge_attempts(attempts: Sequence[Suite]) -> Suite:
         absent = Case.saying(case.classname, case.name, Outcome.SKIPPED, message)
         cases.append(_merged(absent, seen))
     properties = dict(last.properties)
+    if len({f"{case.classname}_{case.name}" for case in cases}) < len(cases):
+        # Cases of different attempts may share a GitLab key; rare, so loaded only then.
+        from ros_isolated_test.xunit.normalise import distinct_gitlab_keys
+
+        properties[RENAMED_PROPERTY] = distinct_gitlab_keys(cases)
     for number in _kept_numbers(total - 1):
         for key, value in attempts[number - 1].properties.items():
             if last.properties.get(key) != value:
@@ -84,7 +98,7 @@ def kept(attempts: list[Attempt], limit: int = ATTEMPTS_KEPT) -> list[Attempt]:
     tail = limit - head
     cut = len(attempts) - limit
     first = attempts[-tail]
-    note = f"[... {cut} more attempt(s) not kept ...]"
+    note = CUT_NOTE.format(cut=cut)
     marked = Attempt(
         first.kind,
         first.message,
@@ -94,6 +108,19 @@ def kept(attempts: list[Attempt], limit: int = ATTEMPTS_KEPT) -> list[Attempt]:
         first.system_err,
     )
     return [*attempts[:head], marked, *attempts[len(attempts) - tail + 1 :]]
+
+
+def attempt_count(attempts: list[Attempt]) -> int:
+    """How many attempts ``attempts`` stand for: each, plus those a cut note says were cut.
+
+    Read back from a file, only the kept ones are there; the note keeps the count true.
+    """
+    cut = 0
+    for attempt in attempts:
+        match = _CUT_NOTE.match(attempt.text)
+        if match:
+            cut += int(match.group(1))
+    return len(attempts) + cut
 
 
 def _kept_numbers(count: int) -> list[int]:

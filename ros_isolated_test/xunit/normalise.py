@@ -7,7 +7,7 @@ nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases, launch_te
 text-only-in-message, xmlrunner's timestamped suite names, ctest's missing ``errors``
 and empty output, gtest and ctest disabled tests shown as passed. Some fixes are for one
 reader: GitLab's case key and its XML type converter (see ``distinct_gitlab_keys`` and
-``gitlab_safe_type``), Jenkins dropping a suite without cases (``no_cases``).
+``serialise.gitlab_safe_type``), Jenkins dropping a suite without cases (``no_cases``).
 """
 
 from __future__ import annotations
@@ -24,33 +24,16 @@ from ros_isolated_test.xunit.reader import (
     RawOutcome,
     ReadResult,
 )
+from ros_isolated_test.xunit.serialise import (
+    GITLAB_CONVERTED_TYPES,
+    TYPE_LIMIT,
+    gitlab_safe_type,
+)
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token
 
 _XMLRUNNER_SUFFIX = re.compile(r"-[0-9]{14}$")
 _SETUP_CLASS = re.compile(r"^(setUpClass|tearDownClass|setUpModule|tearDownModule) \((.+)\)$")
 _PRIMARY = {"failure": Outcome.FAILURE, "error": Outcome.ERROR, "skipped": Outcome.SKIPPED}
-#: ``type`` values GitLab's XML converter (ActiveSupport's ``Hash.from_xml``, matched
-#: exactly as written) acts on: ``symbol`` and ``yaml`` are refused, which drops the whole
-#: file; ``date``/``datetime`` fail on text that is no date; the others turn the element's
-#: text into a number, a decoded blob or an empty list. ``string`` is harmless.
-GITLAB_CONVERTED_TYPES = frozenset(
-    {
-        "symbol",
-        "yaml",
-        "date",
-        "datetime",
-        "dateTime",
-        "integer",
-        "float",
-        "double",
-        "decimal",
-        "boolean",
-        "base64Binary",
-        "binary",
-        "file",
-        "array",
-    }
-)
 
 
 def prefixed(package: str | None, classname: str) -> str:
@@ -151,19 +134,16 @@ def no_cases(classname: str) -> Case:
     return Case.saying(classname, "no test cases", Outcome.SKIPPED, message, "NoTestCases")
 
 
-def gitlab_safe_type(value: str) -> str:
-    """A producer's ``type`` that GitLab's converter leaves alone, keeping what it said."""
-    return f"{value} (producer type)" if value in GITLAB_CONVERTED_TYPES else value
-
-
 def _gitlab_safe_types(cases: list[Case]) -> str:
+    """Say which types the serialiser will write safely; checked as written: trimmed."""
     found: list[str] = []
     for case in cases:
         items: list[Case | Attempt] = [case, *case.attempts]
         for item in items:
-            if item.type in GITLAB_CONVERTED_TYPES:
-                found.append(item.type)
-                item.type = gitlab_safe_type(item.type)
+            written = name_token(item.type, "", TYPE_LIMIT)
+            if written in GITLAB_CONVERTED_TYPES:
+                found.append(written)
+                item.type = gitlab_safe_type(written)
     if not found:
         return ""
     kinds = ", ".join(sorted(set(found)))

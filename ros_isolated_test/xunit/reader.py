@@ -84,7 +84,12 @@ ENTITY_LIMIT = 4096
 ENTITY_BUDGET = 1024 * 1024
 ENTITY_DEPTH = 32
 _ENTITY_NAME = r"[A-Za-z_:][A-Za-z0-9._:-]{0,63}"
-_ENTITY_DECLARATION = re.compile(rf"<!ENTITY[ \t\r\n]+({_ENTITY_NAME})[ \t\r\n]+([\"'])")
+#: An entity declaration up to its value; group 1 marks a parameter entity.
+_ENTITY_HEAD = re.compile(rf"<!ENTITY[ \t\r\n]+(%[ \t\r\n]+)?({_ENTITY_NAME})[ \t\r\n]+")
+#: Where a scan of a DOCTYPE (before its internal subset) or of one declaration stops.
+_DOCTYPE_MARK = re.compile("[\"'\\[>]")
+_DECLARATION_MARK = re.compile("[\"'>]")
+_SUBSET_MARK = re.compile("[<\\]]")
 _ENTITY_REFERENCE = re.compile(rf"&({_ENTITY_NAME});")
 _OPEN_ENTITY_REFERENCE = re.compile(rf"&(?:{_ENTITY_NAME})?$")
 _LEGAL_CHAR_REF = re.compile(r"&#(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));")
@@ -688,22 +693,15 @@ class _Entities:
 
     def define(self) -> list[str]:
         """Expand the declared entities; returns what to report about them."""
-        prolog = _without_comments("".join(self.prolog))
+        prolog = "".join(self.prolog)
         self.prolog = []
-        start = prolog.find("<!DOCTYPE")
-        if start < 0:
-            return []
         notes = []
         if self.size > PROLOG_LIMIT:
             notes.append(
                 f"the prolog is over {PROLOG_LIMIT} characters: entities declared beyond "
                 "that were not expanded"
             )
-        literals: dict[str, str | None] = {}
-        for match in _ENTITY_DECLARATION.finditer(prolog, start):
-            end = prolog.find(match.group(2), match.end(), match.end() + ENTITY_LIMIT + 1)
-            # The first declaration of a name binds (XML 1.0, section 4.2).
-            literals.setdefault(match.group(1), prolog[match.end() : end] if end >= 0 else None)
+        literals = _declared_literals(prolog)
         values: dict[str, str | None] = {}
         for name in literals:
             self._expand(name, literals, values, ())
@@ -778,18 +776,81 @@ def _character(match: re.Match[str]) -> str:
     return chr(code) if xml_text.legal(code) else match.group()
 
 
-def _without_comments(text: str) -> str:
-    """``text`` without ``<!-- -->`` comments, in linear time (a regex could backtrack)."""
-    kept: list[str] = []
+def _declared_literals(prolog: str) -> dict[str, str | None]:
+    """The general entities declared at the top level of the DOCTYPE's internal subset.
+
+    Scanned as a parser reads it, in linear time: quoted literals, comments and processing
+    instructions are skipped whole, so a declaration inside one defines nothing, nor does
+    one inside a parameter entity, which is never expanded. The five predefined entities
+    are never redefined: the sanitiser's own ``&lt;`` must stay ``<``. ``None``: a value
+    over ENTITY_LIMIT characters, or not ending within the prolog kept.
+    """
+    literals: dict[str, str | None] = {}
+    pos = _internal_subset(prolog)
+    while pos >= 0:
+        mark = _SUBSET_MARK.search(prolog, pos)
+        if mark is None or mark.group() == "]":
+            break
+        start = mark.start()
+        if prolog.startswith(("<!--", "<?"), start):
+            pos = _after(prolog, "-->" if prolog[start + 1] == "!" else "?>", start + 2)
+            continue
+        head = _ENTITY_HEAD.match(prolog, start)
+        pos = head.end() if head else start + 1
+        if head and pos < len(prolog) and prolog[pos] in "\"'":
+            end = prolog.find(prolog[pos], pos + 1)
+            name, value = head.group(2), prolog[pos + 1 : end] if end >= 0 else None
+            if not head.group(1) and name not in _PREDEFINED:
+                # The first declaration of a name binds (XML 1.0, section 4.2); a value
+                # ending beyond the kept prolog is over the limit too.
+                too_long = value is None or len(value) > ENTITY_LIMIT
+                literals.setdefault(name, None if too_long else value)
+            if end < 0:
+                break  # all that follows is inside the literal
+            pos = end + 1
+        pos = _declaration_end(prolog, pos)
+    return literals
+
+
+def _internal_subset(prolog: str) -> int:
+    """Where the DOCTYPE's internal subset starts, past its ``[``; -1 if it has none."""
     pos = 0
-    while (start := text.find("<!--", pos)) >= 0:
-        kept.append(text[pos:start])
-        end = text.find("-->", start + 4)
-        if end < 0:
-            return "".join(kept)
-        pos = end + 3
-    kept.append(text[pos:])
-    return "".join(kept)
+    while (start := prolog.find("<", pos)) >= 0:
+        if prolog.startswith(("<!--", "<?"), start):
+            pos = _after(prolog, "-->" if prolog[start + 1] == "!" else "?>", start + 2)
+            if pos < 0:
+                return -1
+        elif prolog.startswith("<!DOCTYPE", start):
+            pos = start + 9
+            while mark := _DOCTYPE_MARK.search(prolog, pos):
+                if mark.group() == "[":
+                    return mark.end()
+                if mark.group() == ">":
+                    return -1
+                pos = _after(prolog, mark.group(), mark.end())
+                if pos < 0:
+                    return -1
+            return -1
+        else:
+            pos = start + 1
+    return -1
+
+
+def _declaration_end(text: str, pos: int) -> int:
+    """Past the ``>`` closing the markup declaration ``pos`` is in (quotes skipped); -1."""
+    while mark := _DECLARATION_MARK.search(text, pos):
+        if mark.group() == ">":
+            return mark.end()
+        pos = _after(text, mark.group(), mark.end())
+        if pos < 0:
+            return -1
+    return -1
+
+
+def _after(text: str, end: str, pos: int) -> int:
+    """Past the next ``end`` from ``pos``; -1 if there is none."""
+    found = text.find(end, pos)
+    return found + len(end) if found >= 0 else -1
 
 
 _NOT_XML = frozenset({"idna", "punycode", "undefined", "raw_unicode_escape", "unicode_escape"})

@@ -9,10 +9,11 @@ test suite parses and validates what this writes against ``schemas/junit.xsd``.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 
 from ros_isolated_test import __version__
-from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT, kept
+from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT, attempt_count, kept
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
 
@@ -31,6 +32,34 @@ _ATTRIBUTE = str.maketrans(
     }
 )
 _TEXT = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", "\r": "&#13;"})
+#: The line :func:`flaky_note` opens a flaky pass's output with, however it is worded.
+_FLAKY_NOTE = re.compile(
+    r"\APassed after [0-9]+ failed attempt\(s\); [^\n]{0,80}recorded below\.\n?"
+)
+#: Characters kept of a ``type`` attribute.
+TYPE_LIMIT = 256
+#: ``type`` values GitLab's XML converter (ActiveSupport's ``Hash.from_xml``, matched
+#: exactly as written) acts on: ``symbol`` and ``yaml`` are refused, which drops the whole
+#: file; ``date``/``datetime`` fail on text that is no date; the others turn the element's
+#: text into a number, a decoded blob or an empty list. ``string`` is harmless.
+GITLAB_CONVERTED_TYPES = frozenset(
+    {
+        "symbol",
+        "yaml",
+        "date",
+        "datetime",
+        "dateTime",
+        "integer",
+        "float",
+        "double",
+        "decimal",
+        "boolean",
+        "base64Binary",
+        "binary",
+        "file",
+        "array",
+    }
+)
 
 
 def attribute(value: str) -> str:
@@ -41,6 +70,19 @@ def attribute(value: str) -> str:
 def text(value: str) -> str:
     """A legal-XML value escaped for element content."""
     return value.translate(_TEXT)
+
+
+def gitlab_safe_type(value: str) -> str:
+    """A ``type`` that GitLab's converter leaves alone, keeping what the producer said."""
+    return f"{value} (producer type)" if value in GITLAB_CONVERTED_TYPES else value
+
+
+def written_type(value: str, fallback: str = "") -> str:
+    """A ``type`` as written: one trimmed line, checked for GitLab after trimming.
+
+    The check must see the final value: ``"yaml "`` written as ``"yaml"`` drops the file.
+    """
+    return gitlab_safe_type(name_token(value, fallback, TYPE_LIMIT))
 
 
 def _seconds(value: float) -> str:
@@ -67,7 +109,7 @@ def _attempt(lines: list[str], attempt: Attempt) -> None:
     message = xml_safe(attempt.message, ATTEMPT_TEXT_LIMIT)
     fallback = "error" if attempt.kind.endswith("Error") else "failure"
     head = _start(
-        attempt.kind, (("message", message), ("type", name_token(attempt.type, fallback, 256)))
+        attempt.kind, (("message", message), ("type", written_type(attempt.type, fallback)))
     )
     body: list[str] = []
     trace = xml_safe(attempt.text, ATTEMPT_TEXT_LIMIT) or message
@@ -84,12 +126,21 @@ def _attempt(lines: list[str], attempt: Attempt) -> None:
         lines.append(f"      {head}/>\n")
 
 
-def flaky_note(system_out: str, failed: int) -> str:
-    """A flaky pass's output, opened by one line saying so (once, however often re-read)."""
-    note = f"Passed after {failed} failed attempt(s); each is recorded below."
-    if system_out.startswith(note):
-        return system_out
-    return f"{note}\n{system_out}" if system_out.strip() else note
+def flaky_note(system_out: str, failed: int, shown: int) -> str:
+    """A flaky pass's output, opened by one line saying so (once, however often re-read).
+
+    ``failed`` attempts failed and ``shown`` of them are written (:func:`kept`: the oldest
+    and newest halves). A note already there (the file read back) is replaced, not added
+    to, so a canonical file normalised again is unchanged.
+    """
+    if shown >= failed:
+        which = "each is"
+    else:
+        head = shown // 2
+        which = f"the first {head} and the last {shown - head} are"
+    note = f"Passed after {failed} failed attempt(s); {which} recorded below."
+    rest = _FLAKY_NOTE.sub("", system_out, count=1)
+    return f"{note}\n{rest}" if rest.strip() else note
 
 
 def _case(lines: list[str], case: Case) -> None:
@@ -105,8 +156,9 @@ def _case(lines: list[str], case: Case) -> None:
     if case.outcome is not Outcome.PASSED:
         message = xml_safe(case.message, TEXT_LIMIT)
         attributes = [("message", message)]
-        if case.type:
-            attributes.append(("type", xml_safe(case.type, 256)))
+        kind = written_type(case.type)
+        if kind:
+            attributes.append(("type", kind))
         content = xml_safe(case.text, TEXT_LIMIT) or message
         tag = case.outcome.value
         outcome = _start(tag, attributes)
@@ -116,7 +168,8 @@ def _case(lines: list[str], case: Case) -> None:
     attempts = kept(case.attempts)
     if case.outcome is Outcome.PASSED and attempts:
         # The output first: xunit-viewer takes a case's status from its first child.
-        _output(body, "      ", flaky_note(case.system_out, len(case.attempts)), "")
+        note = flaky_note(case.system_out, attempt_count(case.attempts), len(attempts))
+        _output(body, "      ", note, "")
         for attempt in attempts:
             _attempt(body, attempt)
         _output(body, "      ", "", case.system_err)
