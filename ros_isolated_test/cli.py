@@ -19,6 +19,7 @@ from ros_isolated_test.runner.settings import (
     DISABLE_VAR,
     DISCOVERY_RANGE_ENV,
     LOCK_DIR_ENV,
+    MAX_RERUNS,
     POOL_ENV,
     RERUNS_ENV,
     WAIT_TIMEOUT_ENV,
@@ -49,7 +50,7 @@ Environment:
   {LOCK_DIR_ENV}         the lock directory shared by all runners on the machine
   {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
   {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
-  {RERUNS_ENV}           run a failed test again up to N times (run --rerun-failures)
+  {RERUNS_ENV}           rerun a failed test up to N times, N <= {MAX_RERUNS} (run --rerun-failures)
   {DISABLE_VAR}=1                 run without reserving an ID (loudly)
 """
 
@@ -175,11 +176,11 @@ def _junit_xml_of(args: list[str]) -> Path | None:
 )
 @click.option(
     "--rerun-failures",
-    type=click.IntRange(min=0),
+    type=click.IntRange(min=0, max=MAX_RERUNS),
     metavar="N",
     help=f"Run a test that failed (exit code, failures in its result, timeout) again, up to N "
-    "more times, each on a freshly reserved ID; every attempt is kept in the result file, "
-    f"the exit code is the last attempt's. Default: {RERUNS_ENV}, else 0.",
+    f"(at most {MAX_RERUNS}) more times, each on a freshly reserved ID; every attempt is kept "
+    f"in the result file, the exit code is the last attempt's. Default: {RERUNS_ENV}, else 0.",
 )
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
@@ -256,7 +257,8 @@ def status(as_json: bool) -> None:
     from ros_isolated_test.domain_coordinator.status import held_domains
 
     try:
-        config = settings.read()
+        # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.
+        config = settings.read(reruns=0)
     except settings.SettingsError as error:
         click.echo(f"ros-isolated-test: error: {error}", err=True)
         sys.exit(2)

@@ -134,7 +134,9 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
         state.properties.append(("ros_domain_id", str(domain)))
         return
     try:
-        config_settings = settings.read(environ)
+        # reruns=0: the plugin never reruns, so a bad ROS_ISOLATED_TEST_RERUNS (for `run`)
+        # must not fail the session.
+        config_settings = settings.read(environ, reruns=0)
         policy = environment.decide((), config_settings, environ)
     except environment.RefusedError as refusal:
         if explicit:

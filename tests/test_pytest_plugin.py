@@ -249,6 +249,22 @@ def test_activation(
         assert header_lines(done.stdout) == []
 
 
+def test_a_bad_rerun_variable_does_not_concern_the_plugin(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    """ROS_ISOLATED_TEST_RERUNS is `run`'s: the plugin never reruns, so never reads it."""
+    root = project(tmp_path / "pkg")
+    done = run_pytest(root, {**plain_env, "ROS_ISOLATED_TEST_RERUNS": "two"}, "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    domain = recorded(tmp_path)["ROS_DOMAIN_ID"]
+    assert domain is not None and int(domain) > 0  # isolated, as without the variable
+    # The control: a bad variable the plugin does use still stops the session.
+    bad = {**plain_env, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "ten"}
+    refused = run_pytest(root, bad, "test")
+    assert refused.returncode == pytest.ExitCode.USAGE_ERROR, refused.stdout + refused.stderr
+    assert "ROS_ISOLATED_TEST_WAIT_TIMEOUT='ten'" in refused.stderr, refused.stderr
+
+
 def test_explicit_isolation_refuses_a_preset_id(tmp_path: Path, plain_env: dict[str, str]) -> None:
     root = project(tmp_path / "pkg")
     done = run_pytest(root, {**plain_env, "ROS_DOMAIN_ID": "5"}, "--ros-isolation", "test")

@@ -30,7 +30,13 @@ from lxml import etree
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
 from ros_isolated_test.domain_coordinator.queue import Queue
+from ros_isolated_test.runner import settings
+from ros_isolated_test.runner.request import Mode, RunRequest
+from ros_isolated_test.runner.settings import MAX_RERUNS
 from ros_isolated_test.schemas import junit_schema
+from ros_isolated_test.xunit.attempts import merge_attempts
+from ros_isolated_test.xunit.model import Outcome
+from ros_isolated_test.xunit.result_file import ResultFile
 
 #: Fails the first time (no state file yet), passes after: the flake, made certain.
 FLAKY = (
@@ -324,7 +330,7 @@ def test_a_signal_to_the_runner_ends_the_run_without_further_attempts(
     )
 
 
-@pytest.mark.parametrize("value", ["-1", "x", "1.5"])
+@pytest.mark.parametrize("value", ["-1", "x", "1.5", str(MAX_RERUNS + 1)])
 def test_a_bad_rerun_count_is_a_usage_error_with_a_result_file(
     runner_script: str, env: dict[str, str], tmp_path: Path, value: str
 ) -> None:
@@ -394,13 +400,15 @@ def test_without_reruns_the_runner_imports_nothing_of_them(
     args = ["-u", runner_script, str(result), "--generate-result-on-success"]
     plain = _imported([*args, "--command", *command], two_ids, tmp_path)
     assert "ros_isolated_test.runner.session" in plain, "the check must see the real run"
-    assert "copy" not in plain  # what only a rerun needs (copies of the attempts so far)
-    # The control: a rerun does load it.
+    assert "copy" not in plain
     (tmp_path / "state").unlink()
     rerun = _imported(
         [*args, "--env", "ROS_ISOLATED_TEST_RERUNS=1", "--command", *command], two_ids, tmp_path
     )
-    assert "copy" in rerun
+    assert "ros_isolated_test.runner.session" in rerun, "the check must see the real rerun"
+    assert _properties(result)["attempts"] == "2"  # it did run again
+    # Nor does a rerun copy the attempts so far (that was quadratic in the reruns).
+    assert "copy" not in rerun
 
 
 def test_a_runner_killed_during_a_rerun_leaves_the_earlier_failure_on_record(
@@ -434,15 +442,17 @@ def test_a_runner_killed_during_a_rerun_leaves_the_earlier_failure_on_record(
 def test_a_test_that_passes_at_once_runs_once_and_says_so(
     two_ids: dict[str, str], tmp_path: Path
 ) -> None:
+    """Also the control of the cap on N: the documented maximum itself is accepted."""
     result = tmp_path / "once.xml"
+    most = str(MAX_RERUNS)
     proc = run_cli(
-        ["run", "--rerun-failures", "2", "--junit-xml", str(result), "--", "true"], two_ids
+        ["run", "--rerun-failures", most, "--junit-xml", str(result), "--", "true"], two_ids
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert len(_ids(proc.stdout)) == 1 and "attempt 2" not in proc.stdout, proc.stdout
     _valid(result)
     properties = _properties(result)
-    assert (properties["attempts"], properties["rerun_failures"]) == ("1", "2"), properties
+    assert (properties["attempts"], properties["rerun_failures"]) == ("1", most), properties
 
 
 def test_the_rerun_count_does_not_reach_the_test(
@@ -519,3 +529,106 @@ def test_a_signal_while_a_rerun_waits_for_its_id_ends_the_run_at_once(
     assert properties["signal_after_test"] == "SIGTERM", properties
     assert properties["attempts"] == "1", properties
     children.finish(holder)
+
+
+def test_a_rerun_result_is_never_on_disk_without_the_earlier_attempts(tmp_path: Path) -> None:
+    """The rerun's own result is written merged: a kill before the final merge loses nothing.
+
+    The runner's result file driven as the rerun loop drives it, on a real file: after
+    attempt 2 is written (the last write a kill before the final merge leaves), attempt
+    1's failure is on disk beside it, while its own word (passed) still sets the exit code.
+    """
+    path = tmp_path / "pkg" / "t.xml"
+    request = RunRequest(("t",), Mode.AMENT, settings.defaults(), result_file=path)
+    result = ResultFile(request)
+    result.prepare()
+    assert result.write_placeholder()
+    result.write([result.case(Outcome.FAILURE, "attempt one failed")])
+    first = result.last_suite
+    assert first is not None
+    assert result.next_attempt(1, {}, lambda latest: merge_attempts([first, latest]))
+    assert "attempt one failed" in path.read_text()  # the placeholder holds it (the control)
+    rendered = result.write([result.case(Outcome.PASSED)])
+    assert rendered is not None and not rendered.failed  # attempt 2's own word: it passed
+    root = _valid(path)
+    (case,) = root.iter("testcase")
+    (flaky,) = case.findall("flakyFailure")
+    assert flaky.get("message") == "attempt one failed", etree.tostring(root)
+    assert _properties(path)["attempts"] == "2"
+    assert result.last_suite is not None and len(result.last_suite.cases) == 1
+
+
+#: Writes its own failing result file, then waits for the release file, then exits 1.
+OWN_FILE_THEN_WAIT = (
+    'printf \'%s\' \'<testsuite name="s" tests="1"><testcase classname="s" name="c">'
+    '<failure message="own failure"/></testcase></testsuite>\' > "$1"; : > "$2"; '
+    'while [ ! -e "$3" ]; do sleep 0.05; done; exit 1'
+)
+
+
+def test_a_rerun_that_gets_no_id_names_where_the_first_attempts_file_is(
+    env: dict[str, str],
+    lock_dir: Path,
+    tmp_path: Path,
+    children: Children,
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    """The test's own file of attempt 1 moves to .attempt1.orig: the result names that file."""
+    (domain_id,) = free_ids(1)
+    one = {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
+    begun, release = tmp_path / "begun", tmp_path / "release"
+    result = tmp_path / "no_id.xml"
+    log = tmp_path / "log"
+    runner = start_cli(
+        # The rerun queues behind the holder (queued first), and gives up after 2 s.
+        ["run", "--rerun-failures", "1", "--wait-timeout", "2", "--junit-xml", str(result),
+         "--", "sh", "-c", OWN_FILE_THEN_WAIT, "t", str(result), str(begun), str(release)],
+        one, log, started,
+    )  # fmt: skip
+    wait_for(begun)
+    holder = children.python(QUEUE_AND_HOLD, lock_dir, domain_id)
+    poll_until(lambda: bool(Queue(lock_dir).waiters()), "the holder queued")
+    release.touch()
+    assert children.first_line(holder) == "held"
+    assert runner.wait(timeout=120) == 1  # attempt 1's code: the rerun never ran
+    said = log.read_text()
+    assert "attempt 2 did not run" in said, said
+    properties = _properties(result)
+    assert "rerun_not_run" in properties, properties
+    kept = result.with_name(properties["original_result_file"])
+    assert kept == result.with_name("no_id.xml.attempt1.orig"), properties
+    assert b"own failure" in kept.read_bytes()
+    assert not result.with_name("no_id.xml.orig").exists()
+    children.finish(holder)
+
+
+def test_an_attempts_file_that_cannot_be_kept_is_one_line_naming_the_fix(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Something in the way of ``.attempt1.orig`` (a folder the test made): say what to do."""
+    path = tmp_path / "t.xml"
+    request = RunRequest(("t",), Mode.AMENT, settings.defaults(), result_file=path)
+
+    def attempt_one(result: ResultFile) -> None:
+        result.prepare()
+        assert result.write_placeholder()
+        path.write_text(
+            '<testsuite name="s" tests="1"><testcase classname="s" name="c">'
+            '<failure message="own failure"/></testcase></testsuite>'
+        )
+        result.write(result.adopt(), checked=True)
+
+    # The control: nothing in the way, attempt 1's own file is kept, nothing said.
+    kept = ResultFile(request)
+    attempt_one(kept)
+    capsys.readouterr()
+    assert kept.next_attempt(1, {}, lambda latest: latest)
+    assert b"own failure" in path.with_name("t.xml.attempt1.orig").read_bytes()
+    assert capsys.readouterr().err == ""
+    blocked = ResultFile(request)
+    attempt_one(blocked)
+    (path.with_name("t.xml.attempt1.orig") / "made by the test").mkdir(parents=True)
+    capsys.readouterr()
+    assert blocked.next_attempt(1, {}, lambda latest: latest)
+    (line,) = capsys.readouterr().err.splitlines()
+    assert "t.xml.attempt1.orig" in line and "remove what is in the way" in line, line

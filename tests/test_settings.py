@@ -13,6 +13,7 @@ from ros_isolated_test.runner.settings import (
     DEFAULT_WAIT_TIMEOUT,
     DISCOVERY_RANGE_ENV,
     LOCK_DIR_ENV,
+    MAX_RERUNS,
     POOL_ENV,
     RERUNS_ENV,
     WAIT_TIMEOUT_ENV,
@@ -64,6 +65,8 @@ def test_an_option_wins_and_its_variable_is_not_even_read() -> None:
         ({RERUNS_ENV: "-1"}, {}, RERUNS_ENV),
         ({RERUNS_ENV: "1.5"}, {}, RERUNS_ENV),
         ({RERUNS_ENV: "٣"}, {}, RERUNS_ENV),  # a digit to isdigit(), not to a user
+        ({RERUNS_ENV: str(MAX_RERUNS + 1)}, {}, RERUNS_ENV),  # each attempt is kept in memory
+        ({RERUNS_ENV: "9" * 5000}, {}, RERUNS_ENV),  # past int()'s digit limit: still ours
     ],
 )
 def test_a_bad_value_is_one_line_naming_its_source(
@@ -128,3 +131,25 @@ def test_the_wait_timeout_option_is_not_read_from_the_variable_by_click(
     # The option given, the variable is never read.
     given = run_cli(["run", "--wait-timeout", "5", "--", "true"], env, cwd=tmp_path)
     assert given.returncode == 0, given.stdout + given.stderr
+
+
+def test_the_rerun_count_goes_up_to_its_documented_maximum() -> None:
+    """The control of the cap: the maximum itself (and leading zeros) is accepted."""
+    assert settings.reruns_from(str(MAX_RERUNS)) == MAX_RERUNS == 100
+    assert settings.read({RERUNS_ENV: f" 0{MAX_RERUNS} "}).reruns == MAX_RERUNS
+
+
+@pytest.mark.parametrize("entry", ["status", "run"])
+def test_only_run_reads_the_rerun_variable(env: dict[str, str], tmp_path: Path, entry: str) -> None:
+    """A bad ROS_ISOLATED_TEST_RERUNS exported for `run` never breaks `status`; `run` refuses it."""
+    env[RERUNS_ENV] = "two"
+    if entry == "status":
+        proc = run_cli(["status"], env, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert RERUNS_ENV not in proc.stderr, proc.stderr
+    else:
+        result = tmp_path / "r.xml"
+        proc = run_cli(["run", "--junit-xml", str(result), "--", "true"], env, cwd=tmp_path)
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert f"{RERUNS_ENV}='two' is not a number of reruns" in proc.stderr, proc.stderr
+        assert load_result(result).only.outcome == "error"

@@ -378,17 +378,18 @@ def _failed_because(
 
 
 def _placeholder_merge(suites: list[Suite]) -> Callable[[Suite], Suite]:
-    """What the placeholder of a rerun holds: the attempts so far, then the unfinished one.
+    """The attempts so far, then the one given: how a rerun's placeholder and result are written.
 
-    If ctest kills the runner during the rerun, the failures before it stay on record.
-    Copies: the final merge gets the attempts as they were.
+    The file on disk never shows a rerun without the earlier attempts: if ctest kills
+    the runner during the rerun or as it writes the result, the failures before stay on
+    record. No copies: merge_attempts builds new cases and never changes the suites it is given.
     """
-    import copy
-
     from ros_isolated_test.xunit.attempts import merge_attempts
 
-    def merge(placeholder: Suite) -> Suite:
-        return merge_attempts([*copy.deepcopy(suites), placeholder])
+    earlier = tuple(suites)  # those finished now; later ones are appended to ``suites``
+
+    def merge(latest: Suite) -> Suite:
+        return merge_attempts([*earlier, latest])
 
     return merge
 

@@ -4,7 +4,9 @@ Every entry point (``run``, the ctest RUNNER script, ``status``) builds one
 :class:`Settings` here, before anything else happens, and hands it on: nothing deeper
 (policy, coordinator, status) reads a ros-isolated-test variable itself, so a variable
 has one parser, one error message and one meaning everywhere. An option given on the
-command line wins over its variable, and the variable is then not read at all.
+command line wins over its variable, and the variable is then not read at all. Entry
+points that never rerun (``status``, the pytest plugin) pass ``reruns=0`` for that
+reason: a bad ROS_ISOLATED_TEST_RERUNS exported for ``run`` must not break them.
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ DEFAULT_WAIT_TIMEOUT = 600.0
 DISCOVERY_RANGE_ENV = discovery.OVERRIDE_ENV
 #: How many times a failed test runs again (``run --rerun-failures``; CMake's ``RERUNS``).
 RERUNS_ENV = "ROS_ISOLATED_TEST_RERUNS"
+#: The most reruns allowed: every attempt's result is kept in memory until the merge, and
+#: a flake that needs more than this is a failure to fix, not to retry.
+MAX_RERUNS = 100
 DISABLE_VAR = "DISABLE_ROS_ISOLATION"
 #: Values of DISABLE_ROS_ISOLATION that do not disable (upstream treats "set" as disabled).
 _FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
@@ -40,6 +45,7 @@ __all__ = [
     "DISABLE_VAR",
     "DISCOVERY_RANGE_ENV",
     "LOCK_DIR_ENV",
+    "MAX_RERUNS",
     "POOL_ENV",
     "RERUNS_ENV",
     "WAIT_TIMEOUT_ENV",
@@ -124,15 +130,19 @@ def _seconds(text: str, name: str, fix: str) -> float:
 
 
 def reruns_from(text: str, origin: str = RERUNS_ENV) -> int:
-    """A count of reruns (0 or more), or :class:`SettingsError` naming ``origin``.
+    """A count of reruns (0 to :data:`MAX_RERUNS`), or :class:`SettingsError` naming ``origin``.
 
     Whole numbers only: "1.5" or "-1" is a typo, never silently rounded or ignored.
     """
     value = text.strip()
-    if not value.isdigit() or not value.isascii():
+    # Checked by length first: int() refuses (ValueError) strings of thousands of digits.
+    if (
+        not (value.isdigit() and value.isascii() and len(value.lstrip("0")) <= 3)
+        or int(value) > MAX_RERUNS
+    ):
         raise SettingsError(
-            f"{origin}={text!r} is not a number of reruns; set a whole number, 0 or more "
-            "(e.g. 2), or unset it"
+            f"{origin}={text!r} is not a number of reruns; set a whole number from 0 to "
+            f"{MAX_RERUNS} (e.g. 2), or unset it"
         )
     return int(value)
 

@@ -61,9 +61,12 @@ class ResultFile:
         self.written: dict[str, str] = {}
         #: The suite of that final word: one attempt's result, when a test runs again.
         self.last_suite: Suite | None = None
-        # How that final word is built from the properties, and whether it is checked,
-        # to write it again.
-        self._last: tuple[Callable[[dict[str, str]], Suite], bool] | None = None
+        # How that final word is built from the properties, whether it is checked, and
+        # the merge it was written through, to write it again.
+        self._last: _Word | None = None
+        # From a rerun on (next_attempt): what puts the earlier attempts beside this one's
+        # suite, so the file on disk never shows an attempt without the failures before it.
+        self._merge: Callable[[Suite], Suite] | None = None
         # Whether adopt() kept the test's own file aside at ``original``.
         self._adopted = False
         # Why the last write failed, in the system's words (No space left on device).
@@ -108,15 +111,26 @@ class ResultFile:
         """
         self.properties = dict(properties)
         self.problems = []
+        self._merge = merge
         if self.path is None:
             return True
         assert self.original is not None
         if self._adopted:
             self._adopted = False
+            kept = self.attempt_original(finished)
             try:
-                os.replace(self.original, self.attempt_original(finished))
+                os.replace(self.original, kept)
             except OSError as error:
-                _say(f"cannot keep the test's own file of attempt {finished}: {_reason(error)}")
+                _say(
+                    f"cannot keep the test's own file of attempt {finished} as {kept} "
+                    f"({_reason(error)}), so the next attempt may overwrite it; remove what "
+                    "is in the way there and make its folder writable"
+                )
+            else:
+                # Written again (a rerun that gets no ID) or merged, it names the file kept.
+                for said in (self.written, self.last_suite and self.last_suite.properties):
+                    if said and said.get("original_result_file") == self.original.name:
+                        said["original_result_file"] = kept.name
         return self.write_placeholder(merge)
 
     def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
@@ -174,16 +188,23 @@ class ResultFile:
                 merged.properties.setdefault(name, shown(value))
             return merged
 
+        self._merge = None  # it holds every attempt already
         return self._final(build, checked=True)
 
     def _final(
         self, build: Callable[[dict[str, str]], Suite], checked: bool
     ) -> validate.Rendered | None:
+        """Write ``build``'s suite (merged with the earlier attempts, in a rerun).
+
+        Returns this attempt's own rendering: whether *it* failed decides its exit code.
+        """
         properties = dict(self.properties)
         suite = build(properties)
         rendered = validate.render(suite, checked)
-        if self._write(rendered.data):
-            self.written, self._last, self.last_suite = properties, (build, checked), suite
+        merge = self._merge
+        data = rendered.data if merge is None else validate.render(merge(suite)).data
+        if self._write(data):
+            self.written, self._last, self.last_suite = properties, (build, checked, merge), suite
             return rendered
         self._leave_word(suite.cases, suite.time)
         return None
@@ -195,9 +216,11 @@ class ResultFile:
         """
         if self.path is None or self._last is None:
             return
-        build, checked = self._last
+        build, checked, merge = self._last
         properties = dict(self.properties)
         suite = build(properties)
+        if merge is not None:
+            suite, checked = merge(suite), True
         try:
             write_atomically(self.path, validate.render(suite, checked).data)
         except OSError as error:
@@ -372,6 +395,11 @@ class ResultFile:
                 self._adopted = True
                 self.properties["original_result_file"] = self.original.name
         return cases
+
+
+if TYPE_CHECKING:
+    #: A final word: how it is built from the properties, whether it is checked, the merge.
+    _Word = tuple[Callable[[dict[str, str]], Suite], bool, Callable[[Suite], Suite] | None]
 
 
 def _keep_aside(path: Path, original: Path) -> None:

@@ -25,7 +25,7 @@ EPILOG = (
     "ROS_ISOLATED_TEST_LOCK_DIR, ROS_ISOLATED_TEST_WAIT_TIMEOUT, "
     "ROS_ISOLATED_TEST_DISCOVERY_RANGE (see ros-isolated-test run --help), and "
     "ROS_ISOLATED_TEST_RERUNS=N (also in --env / ENV, which wins): run a failed test again "
-    "up to N times, keeping every attempt in the result file."
+    "up to N times (N from 0 to 100), keeping every attempt in the result file."
 )
 
 #: run_test.py's options: (name, metavar or None for a flag, repeats, help). No argparse:
