@@ -36,7 +36,13 @@ from helpers.commands import CLI, run_cli, run_runner
 from helpers.results import ResultSummary, load_result
 from helpers.workspace import CrosstalkBuilds, crosstalk_workspace
 
-from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, POOL_ENV, port_guard, squatters
+from ros_isolated_test.domain_coordinator import (
+    LOCK_DIR_ENV,
+    POOL_ENV,
+    participants,
+    port_guard,
+    squatters,
+)
 from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
 from ros_isolated_test.runner.settings import WAIT_TIMEOUT_ENV
 
@@ -125,7 +131,8 @@ def marker(lock_dir: Path) -> Iterator[bytes]:
 
 def _free_ids(count: int) -> list[int]:
     """IDs nothing on this machine uses now, at random: other sessions may test beside us."""
-    busy = squatters.scan()
+    # A DDS participant elsewhere (another session's rclpy test) keeps an ID from us too.
+    busy = set(squatters.scan()) | set(participants.bound_domains())
     free = [
         domain_id
         for domain_id in range(102, HIGHEST_VALID_ID + 1)
