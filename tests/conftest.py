@@ -87,13 +87,23 @@ def lock_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("locks")
 
 
-@pytest.fixture
-def env(lock_dir: Path) -> dict[str, str]:
-    """The environment for runner processes: no ROS_DOMAIN_ID, our own lock dir."""
+def _runner_env(lock_dir: Path) -> dict[str, str]:
     clean = {key: value for key, value in os.environ.items() if key not in POLICY_VARS}
     clean["ROS_ISOLATED_TEST_LOCK_DIR"] = str(lock_dir)
     clean["PATH"] = f"{BIN}{os.pathsep}{clean.get('PATH', '')}"
     return clean
+
+
+@pytest.fixture
+def env(lock_dir: Path) -> dict[str, str]:
+    """The environment for runner processes: no ROS_DOMAIN_ID, our own lock dir."""
+    return _runner_env(lock_dir)
+
+
+@pytest.fixture(scope="module")
+def module_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """``env`` for a module whose tests share one folder of results (one lock dir)."""
+    return _runner_env(tmp_path_factory.mktemp("locks"))
 
 
 @pytest.fixture(autouse=True)

@@ -32,7 +32,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import pytest
-from helpers import capabilities
+from helpers import capabilities, commands
 from helpers.commands import CLI, HUNG
 from helpers.distros import JAZZY, KILTED
 from helpers.domains import free_ids
@@ -53,8 +53,7 @@ VALID_IDS = set(range(1, HIGHEST_VALID_ID + 1))
 
 def ament_args(result: Path, command: Sequence[str]) -> list[str]:
     """run_test.py's arguments, as ctest passes them to any RUNNER."""
-    return [str(result), "--package-name", "p", "--generate-result-on-success",
-            "--command", *command]  # fmt: skip
+    return commands.ament_args(result, command, "--generate-result-on-success", package="p")
 
 
 def ours(board: Board, label: str, runner_script: str, env: Mapping[str, str], out: Path) -> Job:

@@ -12,14 +12,13 @@ fails on raw files where the consumers are known to differ.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from helpers import readers
-from helpers.commands import BIN, POLICY_VARS, run_cli, run_runner
+from helpers.commands import normalise, run_runner
 from helpers.readers import READERS, Reading
 from lxml import etree
 
@@ -160,22 +159,6 @@ class Folder:
         return self.path / f"{name}.xml"
 
 
-@pytest.fixture(scope="module")
-def module_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The ``env`` fixture's environment, for the one folder all tests here share."""
-    clean = {key: value for key, value in os.environ.items() if key not in POLICY_VARS}
-    clean["ROS_ISOLATED_TEST_LOCK_DIR"] = str(tmp_path_factory.mktemp("locks"))
-    clean["PATH"] = f"{BIN}{os.pathsep}{clean.get('PATH', '')}"
-    return clean
-
-
-def normalise(source: Path, output: Path, env: Mapping[str, str]) -> None:
-    """``ros-isolated-test normalise``: the runner's own normalisation, for a given file."""
-    proc = run_cli(["normalise", "--package-name", PACKAGE, str(source), "-o", str(output)], env)
-    assert proc.returncode in (0, 1), proc.stdout + proc.stderr
-    assert output.is_file(), proc.stdout + proc.stderr
-
-
 def runner(
     name: str, command: list[str], staging: Path, script: str, env: Mapping[str, str]
 ) -> tuple[Path, int]:
@@ -196,10 +179,10 @@ def folder(
     raw = tmp_path_factory.mktemp("crafted")
     staging = tmp_path_factory.mktemp("staging")
     for name in SAMPLE_NAMES:
-        normalise(SAMPLES / f"{name}.xml", out / f"{name}.xml", module_env)
+        normalise(SAMPLES / f"{name}.xml", out / f"{name}.xml", module_env, PACKAGE)
     for name, crafted in CRAFTED.items():
         (raw / f"{name}.xml").write_text(crafted.xml)
-        normalise(raw / f"{name}.xml", out / f"crafted_{name}.xml", module_env)
+        normalise(raw / f"{name}.xml", out / f"crafted_{name}.xml", module_env, PACKAGE)
     own = staging / "collision.own"
     own.write_text(CRAFTED["gitlab_collision"].xml)
     collided, collided_code = runner(

@@ -9,7 +9,6 @@ two with ``report`` means the attributes and the elements say the same thing.
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import subprocess
@@ -18,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from helpers.commands import BIN, POLICY_VARS, REPO, run_cli, run_runner
+from helpers.commands import BIN, REPO, normalise, run_cli, run_runner
 from lxml import etree
 
 from ros_isolated_test.xunit import validate
@@ -96,21 +95,6 @@ class Folder:
     scratch: Path
 
 
-@pytest.fixture(scope="module")
-def module_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The ``env`` fixture's environment, for the one folder all tests here share."""
-    clean = {key: value for key, value in os.environ.items() if key not in POLICY_VARS}
-    clean["ROS_ISOLATED_TEST_LOCK_DIR"] = str(tmp_path_factory.mktemp("locks"))
-    clean["PATH"] = f"{BIN}{os.pathsep}{clean.get('PATH', '')}"
-    return clean
-
-
-def normalise(sample: Path, output: Path, env: Mapping[str, str]) -> None:
-    proc = run_cli(["normalise", "--package-name", PACKAGE, str(sample), "-o", str(output)], env)
-    assert proc.returncode in (0, 1), proc.stdout + proc.stderr
-    assert output.is_file(), proc.stdout + proc.stderr
-
-
 def real_run(name: str, run: Run, staging: Path, runner: str, env: Mapping[str, str]) -> Path:
     """Run it for real; the canonical file it left."""
     result = staging / f"{name}.xml"
@@ -147,7 +131,7 @@ def folder(
     out = tmp_path_factory.mktemp("canonical")
     staging = tmp_path_factory.mktemp("staging")
     for name in SAMPLE_NAMES:
-        normalise(SAMPLES / f"{name}.xml", out / f"{name}.xml", module_env)
+        normalise(SAMPLES / f"{name}.xml", out / f"{name}.xml", module_env, PACKAGE)
     for name, run in RUNS.items():
         # Only the canonical file: the test's own, kept as .orig, stays in staging.
         shutil.copy(real_run(name, run, staging, runner_script, module_env), out / f"{name}.xml")

@@ -27,12 +27,12 @@ POLICY_VARS = (
 HUNG = 120
 
 
-def run_cli(
-    args: Sequence[str], env: Mapping[str, str], **kwargs: object
+def run_process(
+    argv: Sequence[str], env: Mapping[str, str], **kwargs: object
 ) -> subprocess.CompletedProcess[str]:
-    """``ros-isolated-test ARGS`` as a real process, output captured as text."""
+    """One of our programs as a real process, output captured as text, hangs stopped."""
     return subprocess.run(  # type: ignore[call-overload, no-any-return]
-        [CLI, *args],
+        list(argv),
         check=False,
         env=dict(env),
         capture_output=True,
@@ -40,21 +40,27 @@ def run_cli(
         timeout=HUNG,
         **kwargs,
     )
+
+
+def run_cli(
+    args: Sequence[str], env: Mapping[str, str], **kwargs: object
+) -> subprocess.CompletedProcess[str]:
+    """``ros-isolated-test ARGS`` as a real process, output captured as text."""
+    return run_process([CLI, *args], env, **kwargs)
 
 
 def run_runner(
     runner_script: str, args: Sequence[str], env: Mapping[str, str], **kwargs: object
 ) -> subprocess.CompletedProcess[str]:
     """The RUNNER script exactly as ctest calls it: ``python3 -u <script> ARGS``."""
-    return subprocess.run(  # type: ignore[call-overload, no-any-return]
-        [sys.executable, "-u", runner_script, *args],
-        check=False,
-        env=dict(env),
-        capture_output=True,
-        text=True,
-        timeout=HUNG,
-        **kwargs,
-    )
+    return run_process([sys.executable, "-u", runner_script, *args], env, **kwargs)
+
+
+def ament_args(
+    result: Path, command: Sequence[str], *options: str, package: str = "pkg"
+) -> list[str]:
+    """run_test.py's arguments as ctest passes them: ``RESULT --package-name P ... --command``."""
+    return [str(result), "--package-name", package, *options, "--command", *command]
 
 
 def ament(
@@ -67,8 +73,15 @@ def ament(
     package: str = "pkg",
 ) -> subprocess.CompletedProcess[str]:
     """``python3 -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest runs it."""
-    args = [str(result), "--package-name", package, *options, "--command", *command]
+    args = ament_args(result, command, *options, package=package)
     return run_runner(runner_script, args, env, cwd=cwd)
+
+
+def normalise(source: Path, output: Path, env: Mapping[str, str], package: str) -> None:
+    """``ros-isolated-test normalise``: the runner's own normalisation, for a given file."""
+    proc = run_cli(["normalise", "--package-name", package, str(source), "-o", str(output)], env)
+    assert proc.returncode in (0, 1), proc.stdout + proc.stderr
+    assert output.is_file(), proc.stdout + proc.stderr
 
 
 def start_cli(

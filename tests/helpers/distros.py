@@ -21,7 +21,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from helpers.commands import CLI, HUNG
+from helpers import commands
+from helpers.commands import CLI
 
 REPO = Path(__file__).resolve().parents[2]
 #: Set by the ROS wheels' ``.pth`` hook once it has re-executed Python with the library
@@ -186,15 +187,7 @@ class Tools:
         self, args: Sequence[str], env: Mapping[str, str], **kwargs: object
     ) -> subprocess.CompletedProcess[str]:
         """``ros-isolated-test ARGS`` from this venv (``env`` is taken as given)."""
-        return subprocess.run(  # type: ignore[call-overload, no-any-return]
-            [self.cli, *args],
-            check=False,
-            env=dict(env),
-            capture_output=True,
-            text=True,
-            timeout=HUNG,
-            **kwargs,
-        )
+        return commands.run_process([self.cli, *args], env, **kwargs)
 
     def ament(
         self,
@@ -207,19 +200,11 @@ class Tools:
         package: str = "pkg",
     ) -> subprocess.CompletedProcess[str]:
         """``PYTHON -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest does."""
-        args = [str(result), "--package-name", package, *options, "--command", *command]
+        args = commands.ament_args(result, command, *options, package=package)
         return self.run_runner(runner_script, args, env, cwd=cwd)
 
     def run_runner(
         self, runner_script: str, args: Sequence[str], env: Mapping[str, str], **kwargs: object
     ) -> subprocess.CompletedProcess[str]:
         """The RUNNER as ctest calls it on this distro: ``<venv python> -u <script> ARGS``."""
-        return subprocess.run(  # type: ignore[call-overload, no-any-return]
-            [self.python, "-u", runner_script, *args],
-            check=False,
-            env=dict(env),
-            capture_output=True,
-            text=True,
-            timeout=HUNG,
-            **kwargs,
-        )
+        return commands.run_process([self.python, "-u", runner_script, *args], env, **kwargs)
