@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import contention
+import cpu_load
 import exhaustion
 import output_volume
 import overhead
@@ -70,6 +71,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "pytest": pytest_session.run,
     "wave": wave_of_tests.run,
     "preset": preset.run,
+    "cpu_load": cpu_load.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"

@@ -11,8 +11,10 @@ from pathlib import Path
 import click
 
 from ros_isolated_test import __version__
+from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
 from ros_isolated_test.process.supervisor import KILL_GRACE
 from ros_isolated_test.runner import session, settings
+from ros_isolated_test.runner.partition import OPT_OUT_ENV as GZ_PARTITION_ENV
 from ros_isolated_test.runner.request import Mode, RunRequest, test_name_of
 from ros_isolated_test.runner.settings import (
     DEFAULT_WAIT_TIMEOUT,
@@ -35,9 +37,11 @@ Exit codes:
   128+N    the command was killed by signal N, or the runner got signal N
   1        the test's result file reports failures, or the result file or
            --output-file could not be fully written
-  2        nothing was run: bad arguments or settings, ROS_DOMAIN_ID was preset,
-           or the --junit-xml or --output-file path cannot be used
-  3        nothing was run: no domain ID could be reserved
+  2        nothing was run: bad arguments or settings, ROS_DOMAIN_ID (or
+           GZ_PARTITION, IGN_PARTITION) was preset,
+           the --junit-xml or --output-file path cannot be used, --resources
+           asks for more than the capacity, or runners disagree on a capacity
+  3        nothing was run: no domain ID (or the resources asked for) came free
   124      stopped by --timeout
   126/127  the command could not be executed / was not found
 """
@@ -51,6 +55,12 @@ Environment:
   {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
   {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
   {RERUNS_ENV}           rerun a failed test up to N times, N <= {MAX_RERUNS} (run --rerun-failures)
+  {RESOURCES_ENV}        resources the test holds, e.g. cpu=2,mem=4G,gpu=1 (run --resources)
+  {CAPACITY_ENV}         what the machine has, e.g. cpu=8,mem=16G,gpu=1,sim=2; default:
+                                     the CPUs usable, MemTotal, 1 of anything else;
+                                     give every runner the same
+  {GZ_PARTITION_ENV}=off set no Gazebo partition (GZ_PARTITION, IGN_PARTITION)
+                                     per test, and refuse no preset one
   {DISABLE_VAR}=1                 run without reserving an ID (loudly)
 """
 
@@ -182,6 +192,14 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     f"(at most {MAX_RERUNS}) more times, each on a freshly reserved ID; every attempt is kept "
     f"in the result file, the exit code is the last attempt's. Default: {RERUNS_ENV}, else 0.",
 )
+@click.option(
+    "--resources",
+    metavar="NAME=AMOUNT,...",
+    help=f"Machine resources the test holds while it runs, taken with its ID (e.g. "
+    f"cpu=2,mem=4G,gpu=1; mem in K, M, G, T): runners wait, first come first served, until "
+    f"they are free, machine-wide. Capacity: {CAPACITY_ENV}, else the CPUs this runner may "
+    f"use, MemTotal, and 1 of any other name (exclusive). Default: {RESOURCES_ENV}, else none.",
+)
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
     junit_xml: Path | None,
@@ -192,19 +210,25 @@ def run(
     wait_timeout: float | None,
     discovery_range: str | None,
     rerun_failures: int | None,
+    resources: str | None,
     command: tuple[str, ...],
 ) -> None:
     """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
 
     Put the command after `--`. Its stdout and stderr are streamed as produced. A
     ROS_DOMAIN_ID already set in the environment is refused: unset it, or set
-    DISABLE_ROS_ISOLATION=1 to run without isolation. Every process the command
+    DISABLE_ROS_ISOLATION=1 to run without isolation. The test also gets a Gazebo
+    transport partition of its own (GZ_PARTITION and IGN_PARTITION; a preset one is
+    refused the same way). Every process the command
     starts is stopped when it ends, before the ID is released; SIGINT, SIGTERM and
     SIGHUP to the runner are passed on to the test.
     """
     try:
         config = settings.read(
-            wait_timeout=wait_timeout, discovery_range=discovery_range, reruns=rerun_failures
+            wait_timeout=wait_timeout,
+            discovery_range=discovery_range,
+            reruns=rerun_failures,
+            resources=resources,
         )
     except settings.SettingsError as error:
         sys.exit(session.report_usage_error(str(error), junit_xml))
@@ -241,6 +265,9 @@ def runner_path() -> None:
 def status(as_json: bool) -> None:
     """List every domain ID in use on this machine, and by whom; then who waits for one.
 
+    GZ_PARTITION is the Gazebo transport partition a runner gave its test (GZ_PARTITION,
+    IGN_PARTITION; "gz_partition" in --json), unless it ran with
+    ROS_ISOLATED_TEST_GZ_PARTITION=off.
     HELD BY is "runner" (a ros-isolated-test runner holds its lock), "port" (its TCP
     port 32768+ID is bound: upstream's domain_coordinator, Kilted's rmw_test_fixture
     or another program), "participant" (a DDS participant outside any runner is
@@ -251,14 +278,20 @@ def status(as_json: bool) -> None:
     coordinator skips all of them; squatters once their ID's last holder died holding
     it (a clean release leaves none). Runners queued for an ID follow, in the order
     they get one
-    (in --json: rows with "via": "queue", "domain_id": null and their "position").
+    (in --json: rows with "via": "queue", "domain_id": null and their "position"),
+    then the machine resources runners hold (rows with "via": "hold" and their
+    "resources") and the capacity (one row with "via": "capacity"), when resources are
+    held, asked for, or ROS_ISOLATED_TEST_CAPACITY is set.
     """
+    from ros_isolated_test.domain_coordinator.holder import iso_time
+    from ros_isolated_test.domain_coordinator.holdings import holds
     from ros_isolated_test.domain_coordinator.queue import Queue
+    from ros_isolated_test.domain_coordinator.resources import capacity_for, describe
     from ros_isolated_test.domain_coordinator.status import held_domains
 
     try:
         # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.
-        config = settings.read(reruns=0)
+        config = settings.read(reruns=0, resources="")
     except settings.SettingsError as error:
         click.echo(f"ros-isolated-test: error: {error}", err=True)
         sys.exit(2)
@@ -273,17 +306,31 @@ def status(as_json: bool) -> None:
     problem = queue.shared_problem()
     if problem is not None:
         click.echo(f"ros-isolated-test: note: {problem}", err=True)
+    held_resources = holds(lock_dir)
+    # The capacity this shell's settings give, with what runners holding something were
+    # given for names it does not set (they may have been started elsewhere).
+    capacity = capacity_for(["cpu", "mem"], config.capacity)
+    for hold in held_resources:
+        for name, amount in hold.capacity.items():
+            capacity.setdefault(name, amount)
+    capacity.update(config.capacity)
+    # Said only where resources are in play: held, asked for, or a capacity set here.
+    in_play = bool(held_resources or config.capacity or any(w.resources for w in waiters))
     if as_json:
         rows: list[dict[str, object]] = [
             {
                 "domain_id": item.domain_id,
                 "via": item.via,
                 **(item.holder.as_dict() if item.holder else {}),
+                **({"gz_partition": gz} if (gz := _gz_partition(item)) else {}),
                 **({"ports": list(item.ports)} if item.ports else {}),
             }
             for item in held
         ]
         rows += [{**waiter.as_dict(), "domain_id": None, "via": "queue"} for waiter in waiters]
+        rows += [{**hold.as_dict(), "via": "hold"} for hold in held_resources]
+        if in_play:
+            rows.append({"via": "capacity", "domain_id": None, "capacity": capacity})
         click.echo(json.dumps(rows, indent=2))
         return
     if not held:
@@ -295,27 +342,63 @@ def status(as_json: bool) -> None:
         click.echo(f"Waiting for a domain ID ({len(waiters)}, first come, first served):")
         click.echo(f"{'POS':>3}  {'PID':>7}  {'USER':<10} {'WAITING SINCE':<19}  COMMAND")
         for waiter in waiters:
+            asks = f"[{describe(waiter.resources)}] " if waiter.resources else ""
             click.echo(
                 f"{waiter.position:>3}  {waiter.pid:>7}  {waiter.user:<10.10} "
-                f"{waiter.since_iso:<19}  {waiter.command}"
+                f"{waiter.since_iso:<19}  {asks}{waiter.command}"
             )
+    if not in_play:
+        return
+    click.echo("")
+    click.echo(f"Resources (capacity {describe(capacity)}):")
+    if not held_resources:
+        click.echo("  none held")
+        return
+    click.echo(f"{'PID':>7}  {'USER':<10} {'SINCE':<19}  {'ID':>3}  {'HOLDS':<20} COMMAND")
+    for hold in held_resources:
+        domain = "-" if hold.domain_id is None else str(hold.domain_id)
+        click.echo(
+            f"{hold.pid:>7}  {hold.user:<10.10} {iso_time(hold.since):<19}  {domain:>3}  "
+            f"{describe(hold.resources):<20} {hold.command}"
+        )
+
+
+def _gz_partition(item: HeldDomain) -> str | None:
+    """The Gazebo partition a runner's test has: a function of its record, as the runner made it.
+
+    A runner with ROS_ISOLATED_TEST_GZ_PARTITION=off set none; its record cannot say so.
+    """
+    from ros_isolated_test.runner import partition
+
+    if item.via != "lock" or item.holder is None:
+        return None
+    return partition.name(item.holder.host, item.domain_id, item.holder.pid)
 
 
 def _print_held(held: list[HeldDomain]) -> None:
     from ros_isolated_test.domain_coordinator.status import anonymous_holder
 
-    click.echo(f"{'ID':>3}  {'HELD BY':<11} {'PID':>7}  {'USER':<10} {'STARTED':<19}  COMMAND")
+    names = {id(item): _gz_partition(item) or "-" for item in held}
+    width = max(len("GZ_PARTITION"), *map(len, names.values()))
+    click.echo(
+        f"{'ID':>3}  {'HELD BY':<11} {'PID':>7}  {'USER':<10} {'STARTED':<19}  "
+        f"{'GZ_PARTITION':<{width}}  COMMAND"
+    )
     kinds = {"lock": "runner", "port": "port", "environment": "squatter"}
     for item in held:
         kind = kinds.get(item.via, item.via)
+        gz = names[id(item)]
         if item.holder is None:
             who = anonymous_holder(item)
-            click.echo(f"{item.domain_id:>3}  {kind:<11} {'-':>7}  {'-':<10} {'-':<19}  {who}")
+            click.echo(
+                f"{item.domain_id:>3}  {kind:<11} {'-':>7}  {'-':<10} {'-':<19}  "
+                f"{gz:<{width}}  {who}"
+            )
             continue
         holder = item.holder
         click.echo(
             f"{item.domain_id:>3}  {kind:<11} {holder.pid:>7}  {holder.user:<10.10} "
-            f"{holder.started_iso:<19}  {holder.command}"
+            f"{holder.started_iso:<19}  {gz:<{width}}  {holder.command}"
         )
 
 

@@ -7,6 +7,8 @@ coordinator before collection, puts it and the discovery range into ``os.environ
 holds it until pytest ends; what the tests left running is ended before the release.
 It goes through the runner's own policy, reservation and sweep (runner/session.py), so
 a preset ID, DISABLE_ROS_ISOLATION and the pool mean here what they mean there.
+Machine resources (``--ros-isolated-test-resources``, ini ``ros_isolated_test_resources``)
+are held with the ID by the same reservation, for the whole session (each xdist worker).
 
 Loaded by every pytest run in the environment, so it imports nothing of its own until it
 knows it is active: inside a ROS package (a package.xml at or above the rootdir or the
@@ -22,7 +24,16 @@ from pathlib import Path
 
 import pytest
 
+TYPE_CHECKING = False  # nothing of the runner is imported until the plugin is active
+if TYPE_CHECKING:
+    from ros_isolated_test.runner.environment import Policy
+    from ros_isolated_test.runner.session import Held
+    from ros_isolated_test.runner.settings import Settings
+
 INI = "ros_isolation"
+#: The session's request of machine resources: the ini option and its command-line twin.
+RESOURCES_INI = "ros_isolated_test_resources"
+RESOURCES_OPTION = "--ros-isolated-test-resources"
 _ON_WORDS = frozenset({"1", "true", "yes", "on"})
 _OFF_WORDS = frozenset({"0", "false", "no", "off"})
 #: Where a worker tells the xdist controller it got no ID (the controller exits with it).
@@ -72,6 +83,22 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "ROS isolation: auto (default: on inside a ROS package), true, or false",
         default="auto",
     )
+    resources_help = (
+        "machine resources the session holds with its ROS_DOMAIN_ID until pytest ends, "
+        "waiting until every runner on the machine has left enough free, e.g. "
+        "cpu=2,mem=4G,gpu=1 (capacity: ROS_ISOLATED_TEST_CAPACITY); a request turns "
+        "isolation on outside a ROS package too, as --ros-isolation does. With "
+        "pytest-xdist each worker holds them (-n 4 with gpu=1 holds 4 GPUs), the "
+        "controller nothing"
+    )
+    group.addoption(
+        RESOURCES_OPTION,
+        dest="ros_isolated_test_resources",
+        metavar="SPEC",
+        default=None,
+        help=f"{resources_help}; wins over the ini option {RESOURCES_INI}",
+    )
+    parser.addini(RESOURCES_INI, f"{resources_help}; {RESOURCES_OPTION} wins", default="")
 
 
 def _requested(config: pytest.Config) -> bool | None:
@@ -87,6 +114,14 @@ def _requested(config: pytest.Config) -> bool | None:
     if word not in {"", "auto"}:
         raise pytest.UsageError(f"ini option {INI}={word!r}: use auto, true or false")
     return None
+
+
+def _resources(config: pytest.Config) -> tuple[str, str]:
+    """The session's request ("": none) and where it was given, which its error names."""
+    option: str | None = config.getoption("ros_isolated_test_resources")
+    if option is not None:
+        return option, RESOURCES_OPTION
+    return str(config.getini(RESOURCES_INI)), f"ini option {RESOURCES_INI}"
 
 
 def _in_ros_package(config: pytest.Config) -> bool:
@@ -110,7 +145,11 @@ def pytest_configure(config: pytest.Config) -> None:
     if any(getattr(config.option, name, False) for name in _NO_TEST_OPTIONS):
         return  # --help, --markers, --fixtures, --collect-only: no test runs
     requested = _requested(config)
-    if requested is False or (requested is None and not _in_ros_package(config)):
+    if requested is None and not _in_ros_package(config):
+        if not _resources(config)[0].strip():
+            return
+        requested = True  # resources asked for: held as with --ros-isolation
+    if requested is False:
         return
     state = _State()
     config.stash[_STATE] = state
@@ -120,6 +159,7 @@ def pytest_configure(config: pytest.Config) -> None:
 
 def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: bool) -> None:
     """The runner's decision, then (but in the xdist controller, which runs no test) its ID."""
+    from ros_isolated_test.domain_coordinator.holdings import CapacityConflictError
     from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
     from ros_isolated_test.domain_coordinator.reservation import PoolExhaustedError
     from ros_isolated_test.process.supervisor import KILL_GRACE
@@ -127,35 +167,31 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
     from ros_isolated_test.runner.discovery import DiscoveryError
 
     environ = os.environ
-    domain = environ.get(environment.DOMAIN_VAR)
+    asked, asked_by = _resources(config)
     if environment.held_for_us(environ):
-        # Under our runner (a RUNNER that started pytest): its ID, its cleanup.
-        state.header.append(f"ros-isolated-test: ROS_DOMAIN_ID {domain}, held by the runner")
-        state.properties.append(("ros_domain_id", str(domain)))
+        _under_the_runner(state, environ.get(environment.DOMAIN_VAR), asked, asked_by)
         return
     try:
         # reruns=0: the plugin never reruns, so a bad ROS_ISOLATED_TEST_RERUNS (for `run`)
-        # must not fail the session.
-        config_settings = settings.read(environ, reruns=0)
+        # must not fail the session. Resources: only what pytest's option or ini asks.
+        config_settings = settings.read(
+            environ, reruns=0, resources=asked, resources_origin=asked_by
+        )
         policy = environment.decide((), config_settings, environ)
     except environment.RefusedError as refusal:
         if explicit:
             raise pytest.UsageError(f"ros-isolated-test: {refusal}") from None
-        state.header.append(
-            f"ros-isolated-test: ROS_DOMAIN_ID is already set to {domain!r}: left as it is, "
-            "this session is NOT isolated (unset it to isolate; --ros-isolation refuses it)"
-        )
-        state.properties.append(("ros_domain_id", f"{domain} (preset, not isolated)"))
+        _left_alone(state, refusal.variable)
         return
     except (settings.SettingsError, DiscoveryError) as error:
         raise pytest.UsageError(f"ros-isolated-test: {error}") from None
-    if not policy.isolate:
+    if not policy.isolate and not config_settings.resources:
         lines, properties = session.summary(policy, None)
         state.header.extend(f"ros-isolated-test: {line}" for line in lines)
         state.properties.extend(properties.items())
         return
     if controller:
-        state.header.append("ros-isolated-test: each xdist worker reserves a ROS_DOMAIN_ID")
+        _for_each_worker(state, policy, config_settings)
         return  # the controller runs no test
     _interruptible(state)
     command = ("pytest", *config.invocation_params.args)
@@ -163,25 +199,80 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
         held = state.stack.enter_context(
             session.isolation(policy, config_settings, command, _note, KILL_GRACE)
         )
-    except (PoolExhaustedError, LockDirError) as error:
+    except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
         state.error = f"ros-isolated-test: error: {error}"
         if hasattr(config, "workerinput"):
             return  # said to the controller (pytest_collection): a crash would be restarted
         pytest.exit(state.error, returncode=exit_codes.NO_DOMAIN)
-    assert held is not None  # policy.isolate
-    # Restored first on the way out (LIFO): before the sweep and the release.
-    state.stack.callback(_set_environ, dict(os.environ))
-    _set_environ(policy.for_domain(held.domain_id))
-    lines, properties = session.summary(policy, held.domain_id, config_settings)
-    if policy.discovery is not None:  # its first line: the range, said beside the ID
-        lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
+    assert held is not None  # isolated, or resources held without an ID
+    _holding(config, state, policy, config_settings, held)
+
+
+def _under_the_runner(state: _State, domain: str | None, asked: str, asked_by: str) -> None:
+    """A RUNNER of ours started pytest: its ID, its resources, its cleanup."""
+    state.header.append(f"ros-isolated-test: ROS_DOMAIN_ID {domain}, held by the runner")
+    state.properties.append(("ros_domain_id", str(domain)))
+    if asked.strip():
+        # Asking again here would wait for what the runner may hold already.
+        state.header.append(
+            f"ros-isolated-test: {asked_by} ({asked.strip()}) not held by the plugin: "
+            "the runner holds what it was asked (CMake RESOURCES, ENV ROS_ISOLATED_TEST_RESOURCES)"
+        )
+
+
+def _for_each_worker(state: _State, policy: Policy, config_settings: Settings) -> None:
+    """The xdist controller's header: what each worker will hold (it holds nothing itself)."""
+    from ros_isolated_test.domain_coordinator.resources import describe
+    from ros_isolated_test.runner import session
+
+    if not policy.isolate:
+        lines, _properties = session.summary(policy, None)
+        state.header.extend(f"ros-isolated-test: {line}" for line in lines)
+    each = ["a ROS_DOMAIN_ID"] if policy.isolate else []
+    if config_settings.resources:
+        each.append(describe(config_settings.resources))
+    state.header.append(f"ros-isolated-test: each xdist worker reserves {' and '.join(each)}")
+
+
+def _holding(
+    config: pytest.Config, state: _State, policy: Policy, config_settings: Settings, held: Held
+) -> None:
+    """Into os.environ, pytest's header and --junit-xml: the ID and resources now held."""
+    from ros_isolated_test.runner import session
+
+    if held.domain_id is None:  # DISABLE_ROS_ISOLATION: the resources alone
+        lines, properties = session.summary(policy, None)
     else:
-        lines.insert(0, f"ROS_DOMAIN_ID {held.domain_id}")
+        # Restored first on the way out (LIFO): before the sweep and the release.
+        state.stack.callback(_set_environ, dict(os.environ))
+        _set_environ(policy.for_domain(held.domain_id))
+        lines, properties = session.summary(policy, held.domain_id, config_settings)
+        if policy.discovery is not None:  # its first line: the range, said beside the ID
+            lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
+        else:
+            lines.insert(0, f"ROS_DOMAIN_ID {held.domain_id}")
+    if held.resources:  # said right after the ID, as the runner says it
+        line, more = session.resources_summary(held, config_settings)
+        lines.insert(1, line)
+        properties.update(more)
     state.header.extend(f"ros-isolated-test: {line}" for line in lines)
     state.properties.extend(properties.items())
     workeroutput = getattr(config, "workeroutput", None)
-    if workeroutput is not None:
+    if workeroutput is not None and held.domain_id is not None:
         workeroutput["ros_domain_id"] = held.domain_id
+
+
+def _left_alone(state: _State, name: str) -> None:
+    """Automatic mode met a preset (ROS_DOMAIN_ID, a Gazebo partition): not isolated, said so."""
+    from ros_isolated_test.runner.environment import DOMAIN_VAR
+
+    preset = os.environ.get(name)
+    state.header.append(
+        f"ros-isolated-test: {name} is already set to {preset!r}: left as it is, "
+        "this session is NOT isolated (unset it to isolate; --ros-isolation refuses it)"
+    )
+    property_name = "ros_domain_id" if name == DOMAIN_VAR else "gz_partition"
+    state.properties.append((property_name, f"{preset} (preset, not isolated)"))
 
 
 def _interruptible(state: _State) -> None:

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Installs everything the demo and the test suite need: system build tools (cmake, a C++
-# compiler, googletest, node) from Debian when missing, xunit-viewer from npm into
-# node_modules, then ros-isolated-test with real ROS 2 Jazzy, ament_cmake and colcon
-# from PyPI into .venv, and with ROS 2 Kilted into .venv-kilted.
+# compiler, googletest, node, Gazebo's transport tools) from Debian when missing,
+# xunit-viewer from npm into node_modules, then ros-isolated-test with real ROS 2 Jazzy,
+# ament_cmake and colcon from PyPI into .venv, and with ROS 2 Kilted into .venv-kilted.
 # Safe to run again: it only installs again when pyproject.toml changed.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -29,6 +29,13 @@ done
 [[ -f /usr/include/gtest/gtest.h ]] || missing+=(libgtest-dev)
 [[ -f /usr/include/gmock/gmock.h && -d /usr/src/gmock ]] || missing+=(libgmock-dev)
 command -v npm >/dev/null 2>&1 || missing+=(npm)
+# Gazebo's transport tools (ign-transport-topic): the simulation isolation tests talk
+# over the real transport. Debian has no `ign` wrapper; the tools live under libexec.
+ign_tool() {
+  compgen -G '/usr/libexec/ignition/transport*/ign-transport-topic' >/dev/null ||
+    command -v ign-transport-topic >/dev/null 2>&1
+}
+ign_tool || missing+=(ignition-transport-cli)
 if ((${#missing[@]})); then
   echo "setup: installing system packages for: ${missing[*]}"
   sudo=""
@@ -36,6 +43,7 @@ if ((${#missing[@]})); then
   $sudo apt-get update -qq
   packages=(cmake make g++ util-linux libgtest-dev libgmock-dev google-mock)
   command -v npm >/dev/null 2>&1 || packages+=(nodejs npm)
+  ign_tool || packages+=(ignition-transport-cli)
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${packages[@]}" >/dev/null
 fi
 

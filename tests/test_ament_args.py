@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from helpers.commands import ament
+from helpers.results import load_result
 
 from ros_isolated_test.runner.ament.args import UsageError, help_text, parse
 
@@ -127,3 +129,105 @@ def test_help_lists_every_option() -> None:
         "DISABLE_ROS_ISOLATION",
     ):
         assert option in text
+
+
+#: The variable ament_add_test's ENV (the CMake macros' RESOURCES) passes as --env.
+RESOURCES = "ROS_ISOLATED_TEST_RESOURCES"
+CAPACITY = "ROS_ISOLATED_TEST_CAPACITY"
+
+
+@pytest.fixture
+def no_resource_variables(monkeypatch: pytest.MonkeyPatch) -> None:
+    """parse() reads the runner's own environment: nothing of this machine's may leak in."""
+    monkeypatch.delenv(RESOURCES, raising=False)
+    monkeypatch.delenv(CAPACITY, raising=False)
+
+
+def _resources(*options: str) -> dict[str, int]:
+    return parse(["r.xml", *options, "--command", "x"]).settings.resources
+
+
+@pytest.mark.usefixtures("no_resource_variables")
+def test_resources_come_from_the_tests_env() -> None:
+    assert _resources() == {}
+    assert _resources("--env", f"{RESOURCES}=gpu=1,mem=1K") == {"gpu": 1, "mem": 1024}
+    # The last --env of it wins, as for reruns (ENV of ros_isolated_test_all(), then the call's).
+    last = ("--env", f"{RESOURCES}=gpu=1", "--env", "A=1", f"{RESOURCES}=lidar=1")
+    assert _resources(*last) == {"lidar": 1}
+    # An --append-env of it is no request (path-like variables only).
+    assert _resources("--append-env", f"{RESOURCES}=gpu=1") == {}
+
+
+def test_the_tests_env_wins_over_the_runners_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(CAPACITY, raising=False)
+    monkeypatch.setenv(RESOURCES, "gpu=1")
+    assert _resources() == {"gpu": 1}  # the control: the runner's own variable is read
+    assert _resources("--env", f"{RESOURCES}=lidar=1") == {"lidar": 1}
+    assert _resources("--env", f"{RESOURCES}=") == {}  # an empty value asks for nothing
+    # A bad value in the runner's environment is not even read when --env sets it.
+    monkeypatch.setenv(RESOURCES, "gpu")
+    assert _resources("--env", f"{RESOURCES}=lidar=1") == {"lidar": 1}
+
+
+@pytest.mark.usefixtures("no_resource_variables")
+@pytest.mark.parametrize(
+    ("value", "says"),
+    [
+        ("gpu", "'gpu' is not name=amount"),
+        ("GPU=1", "'GPU' is not a resource name"),
+        ("gpu=0", "gpu='0' is zero"),
+        ("gpu=1,gpu=1", "gpu is given twice"),
+        ("mem=4X", "mem='4X' is not a whole amount"),
+        ("gpu=2", "more than this machine's capacity of gpu, 1 (by default)"),
+    ],
+)
+def test_a_bad_request_is_a_usage_error_naming_the_env(value: str, says: str) -> None:
+    with pytest.raises(UsageError) as raised:
+        parse(["r.xml", "--env", f"{RESOURCES}={value}", "--command", "x"])
+    message = str(raised.value)
+    assert message.startswith(f"--env {RESOURCES}: ") and says in message, message
+    assert "\n" not in message
+    assert raised.value.result_file == Path("r.xml")
+
+
+def test_the_capacity_comes_from_the_runners_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above the default capacity of 1 is refused; the same request fits a capacity set higher."""
+    monkeypatch.delenv(RESOURCES, raising=False)
+    monkeypatch.setenv(CAPACITY, "gpu=2")
+    request = parse(["r.xml", "--env", f"{RESOURCES}=gpu=2", "--command", "x"])
+    assert (request.settings.resources, request.settings.capacity) == ({"gpu": 2}, {"gpu": 2})
+    with pytest.raises(UsageError, match=rf"gpu, 2 \(as set in {CAPACITY}\)"):
+        parse(["r.xml", "--env", f"{RESOURCES}=gpu=3", "--command", "x"])
+
+
+def test_help_names_the_resource_variables() -> None:
+    text = help_text()
+    assert f"{RESOURCES}=cpu=2,mem=4G,gpu=1 (also in --env / ENV, which wins)" in text
+    assert CAPACITY in text
+
+
+def test_a_bad_request_through_the_runner_runs_nothing_and_leaves_a_result(
+    env: dict[str, str], runner_script: str, tmp_path: Path
+) -> None:
+    """A real RUNNER: exit 2, one line, a result file saying why; a good request runs (control)."""
+    for name in (RESOURCES, CAPACITY):
+        env.pop(name, None)
+    result = tmp_path / "r.xml"
+    options = ("--generate-result-on-success", "--env")
+    bad = ament(
+        runner_script, result, ["touch", "ran"], env, *options, f"{RESOURCES}=gpu", cwd=tmp_path
+    )
+    assert bad.returncode == 2, bad.stdout + bad.stderr
+    (line,) = bad.stderr.strip().splitlines()
+    assert f"--env {RESOURCES}: 'gpu' is not name=amount" in line, line
+    assert not (tmp_path / "ran").exists()
+    case = load_result(result).only
+    assert case.outcome == "error" and f"--env {RESOURCES}" in case.message, case
+    good = ament(
+        runner_script, result, ["touch", "ran"], env, *options, f"{RESOURCES}=gpu=1", cwd=tmp_path
+    )
+    assert good.returncode == 0, good.stdout + good.stderr
+    assert (tmp_path / "ran").exists()
+    summary = load_result(result)
+    assert summary.only.outcome == "passed", summary
+    assert summary.properties.get("resources") == "gpu=1", summary.properties

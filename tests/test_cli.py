@@ -211,7 +211,10 @@ def test_run_help_names_every_variable_and_exit_code(env: dict[str, str]) -> Non
         "ROS_ISOLATED_TEST_DISCOVERY_RANGE",
         "DISABLE_ROS_ISOLATION",
         "--output-file could not be fully written",
-        "or the --junit-xml or --output-file path cannot be used",
+        "the --junit-xml or --output-file path cannot be used",
+        "--resources",
+        "ROS_ISOLATED_TEST_RESOURCES",
+        "ROS_ISOLATED_TEST_CAPACITY",
         "124",
         "126/127",
     ):

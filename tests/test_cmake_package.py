@@ -28,6 +28,7 @@ from helpers import capabilities
 from helpers.cmake_package import CMAKE_FILES, PackageBuild, installed_prefix, path_only_env
 from helpers.commands import REPO
 from helpers.domains import free_ids
+from helpers.results import load_result
 from lxml import etree
 
 pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
@@ -389,3 +390,102 @@ def test_a_bad_reruns_value_stops_configuring(tmp_path: Path) -> None:
     assert "RERUNS 'two' is not a number of reruns" in message, message
     good = _configure(tmp_path, "ros_isolated_add_test(t COMMAND true RERUNS 2)\n")
     assert good.returncode == 0, good.stderr  # the control
+
+
+def _ctest(build: Path, env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["ctest", "--test-dir", str(build), "--output-on-failure", *args],
+        env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+
+
+@capabilities.CTEST.mark
+def test_resources_reach_a_real_ctest_run(tmp_path: Path, env: dict[str, str]) -> None:
+    """RESOURCES of a macro and of ros_isolated_test_all() become the test's holding, in its
+    result file; a call's own ENV wins; a test without them holds nothing (control). The
+    capacity comes from ctest's environment: gpu=2 fits ROS_ISOLATED_TEST_CAPACITY=gpu=2,
+    and without it (a default capacity of 1) the same test is refused."""
+    done = _configure(
+        tmp_path,
+        "ros_isolated_add_test(macro_gpu COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO\n"
+        "  RESOURCES gpu=2)\n"
+        "ros_isolated_add_test(plain COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n"
+        "ros_isolated_test_all(RESOURCES gpu=2)\n"
+        "ament_add_test(all_gpu COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n"
+        "ament_add_test(own_env COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO\n"
+        "  ENV ROS_ISOLATED_TEST_RESOURCES=lidar=1)\n",
+    )
+    assert done.returncode == 0, done.stderr
+    ctest_env = {
+        **path_only_env(installed_prefix(tmp_path)),
+        "ROS_ISOLATED_TEST_LOCK_DIR": env["ROS_ISOLATED_TEST_LOCK_DIR"],
+        "ROS_ISOLATED_TEST_DOMAINS": ",".join(map(str, free_ids(2))),
+        "ROS_ISOLATED_TEST_CAPACITY": "gpu=2",
+    }
+    for name in ("ROS_DOMAIN_ID", "ROS_ISOLATED_TEST_RESOURCES"):
+        ctest_env.pop(name, None)
+    build = tmp_path / "build"
+    results = build / "test_results" / "tiny"
+    run = _ctest(build, ctest_env)
+    assert run.returncode == 0, run.stdout + run.stderr
+    held = {
+        name: _properties(results / f"{name}.xml").get("resources")
+        for name in ("macro_gpu", "all_gpu", "own_env", "plain")
+    }
+    assert held == {"macro_gpu": "gpu=2", "all_gpu": "gpu=2", "own_env": "lidar=1", "plain": None}
+    assert _properties(results / "macro_gpu.xml")["capacity"] == "gpu=2"
+    # Without the capacity variable, gpu=2 is more than the machine has: refused, never run.
+    del ctest_env["ROS_ISOLATED_TEST_CAPACITY"]
+    refused = _ctest(build, ctest_env, "-R", "^macro_gpu$")
+    assert refused.returncode != 0, refused.stdout + refused.stderr
+    case = load_result(results / "macro_gpu.xml").only
+    message = case.message
+    assert case.outcome == "error", case
+    assert "--env ROS_ISOLATED_TEST_RESOURCES: gpu=2 is more than" in message, message
+    assert "ROS_ISOLATED_TEST_CAPACITY=gpu=<amount>" in message, message
+
+
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        (
+            "ros_isolated_add_test(t COMMAND true RESOURCES gpu)\n",
+            "RESOURCES 'gpu' is not a request of resources",
+        ),
+        ("ros_isolated_add_test(t COMMAND true RESOURCES)\n", "RESOURCES '' is not a request"),
+        ("ros_isolated_test_all(RESOURCES gpu)\n", "RESOURCES 'gpu' is not a request"),
+        ("ros_isolated_test_all(RESOURCES)\n", "RESOURCES '' is not a request"),
+    ],
+)
+def test_a_bad_resources_value_stops_configuring(tmp_path: Path, body: str, says: str) -> None:
+    done = _configure(tmp_path, body)
+    assert done.returncode != 0, done.stdout
+    message = " ".join(done.stderr.split())
+    assert says in message and "(e.g. RESOURCES cpu=2,mem=4G,gpu=1)" in message, message
+
+
+def test_resources_and_reruns_pass_into_ctest(tmp_path: Path) -> None:
+    """The control of the errors above, and how the two arguments combine: a later
+    ros_isolated_test_all() replaces only what it names; a test with its own RUNNER gets
+    neither."""
+    done = _configure(
+        tmp_path,
+        "ros_isolated_add_test(macro COMMAND true RERUNS 1 RESOURCES cpu=1,mem=1G)\n"
+        "ros_isolated_test_all(RERUNS 2)\n"
+        "ros_isolated_test_all(RESOURCES gpu=1)\n"
+        "ament_add_test(wrapped COMMAND true)\n"
+        'ament_add_test(own COMMAND true RUNNER "${ament_cmake_test_DIR}/run_test.py")\n',
+    )
+    assert done.returncode == 0, done.stderr
+    lines = (tmp_path / "build" / "CTestTestfile.cmake").read_text().splitlines()
+    macro, wrapped, own = (
+        next(line for line in lines if f"[=[{name}]=]" in line)
+        for name in ("macro", "wrapped", "own")
+    )
+    assert (
+        '"--env" "ROS_ISOLATED_TEST_RERUNS=1" "ROS_ISOLATED_TEST_RESOURCES=cpu=1,mem=1G"' in macro
+    ), macro
+    assert '"--env" "ROS_ISOLATED_TEST_RERUNS=2" "ROS_ISOLATED_TEST_RESOURCES=gpu=1"' in wrapped, (
+        wrapped
+    )
+    assert "ROS_ISOLATED_TEST_" not in own, own

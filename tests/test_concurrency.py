@@ -171,9 +171,9 @@ def _table_rows(stdout: str) -> dict[int, tuple[int, str, str, str]]:
     """The rows of runners; ports and squatters elsewhere on this machine are skipped."""
     rows = {}
     for line in stdout.splitlines()[1:]:
-        match = re.match(r"^\s*(\d+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(.*)$", line)
+        match = re.match(r"^\s*(\d+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(.*)$", line)
         assert match, f"unexpected status line: {line!r}"
-        domain_id, kind, pid, user, started, command = match.groups()
+        domain_id, kind, pid, user, started, _gz_partition, command = match.groups()
         if kind != "runner":
             continue
         rows[int(domain_id)] = (int(pid), user, started, command)
@@ -220,6 +220,7 @@ def test_fifty_runners_at_once_hold_fifty_distinct_ids(crowd: Crowd, env: dict[s
         "PID",
         "USER",
         "STARTED",
+        "GZ_PARTITION",
         "COMMAND",
     ]
     table_rows = _table_rows(table.stdout)
@@ -242,7 +243,7 @@ def test_fifty_runners_at_once_hold_fifty_distinct_ids(crowd: Crowd, env: dict[s
     failed = {index: logs[index] for index, code in enumerate(codes) if code != 0}
     assert not failed, failed
     for index, item in seen.items():
-        assert f"Running with ROS_DOMAIN_ID {item.domain_id}\n" in logs[index]
+        assert f"Running with ROS_DOMAIN_ID {item.domain_id} (Gazebo partition " in logs[index]
 
     # Afterwards nothing is held in the lock dir they shared.
     lock_dir = Path(crowd.env[LOCK_DIR_ENV])

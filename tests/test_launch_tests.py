@@ -31,7 +31,7 @@ pytestmark = [pytest.mark.colcon, capabilities.OUTSIDE.mark]
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1] / "examples" / "launch_tokens"
 TOKENS = ("amber", "birch", "cobalt", "dahlia")
-_RUNNING = re.compile(r"^Running with ROS_DOMAIN_ID (\d+)$", re.MULTILINE)
+_RUNNING = re.compile(r"^Running with ROS_DOMAIN_ID (\d+)\b", re.MULTILINE)
 
 
 @dataclass(frozen=True)

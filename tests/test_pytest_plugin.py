@@ -306,7 +306,7 @@ def test_under_the_runner_it_uses_the_runners_id(
     done = run_in(root, env, [CLI, "run", "--", *PYTEST, "--ros-isolation", "test"])
     assert done.returncode == 0, done.stdout + done.stderr
     domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
-    assert done.stdout.startswith(f"Running with ROS_DOMAIN_ID {domain}\n")
+    assert done.stdout.startswith(f"Running with ROS_DOMAIN_ID {domain} (Gazebo partition ")
     assert recorded(tmp_path)["ROS_DOMAIN_ID"] == domain
     assert f"ros-isolated-test: ROS_DOMAIN_ID {domain}, held by the runner" in done.stdout
 
@@ -613,3 +613,189 @@ def test_a_signal_ends_the_tests_leftovers_before_the_release(
     following = project(tmp_path / "following", NEXT_TEST)
     after = run_pytest(following, {**shared, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}, "test")
     assert after.returncode == 0, after.stdout + after.stderr
+
+
+#: Holds its session open until GO exists (so another runner can try the same resources).
+HOLDING_TEST = """\
+import os, pathlib, time
+
+def test_holds_until_go():
+    pathlib.Path(os.environ["READY"]).touch()
+    deadline = time.monotonic() + 120
+    while not os.path.exists(os.environ["GO"]) and time.monotonic() < deadline:
+        time.sleep(0.05)
+"""
+
+
+@pytest.fixture
+def resource_env(plain_env: dict[str, str]) -> dict[str, str]:
+    """plain_env without a resource request or capacity of this machine's own."""
+    clean = dict(plain_env)
+    for name in ("ROS_ISOLATED_TEST_RESOURCES", "ROS_ISOLATED_TEST_CAPACITY"):
+        clean.pop(name, None)
+    return clean
+
+
+def _lidar_runner(env: Mapping[str, str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    """Another runner asking for the one lidar, giving up after 1 s."""
+    return run_in(
+        cwd, env, [CLI, "run", "--resources", "lidar=1", "--wait-timeout", "1", "--", "true"]
+    )
+
+
+def test_the_session_holds_its_resources_until_pytest_ends(
+    tmp_path: Path, resource_env: dict[str, str], started: list[subprocess.Popen[bytes]]
+) -> None:
+    """The ini option's request is held by the session: another runner asking for it gets
+    nothing while the session lives (exit 3), and gets it once pytest ended (control)."""
+    ready, go, junit = tmp_path / "ready", tmp_path / "go", tmp_path / "junit.xml"
+    env = {**resource_env, "READY": str(ready), "GO": str(go)}
+    root = project(tmp_path / "pkg", HOLDING_TEST)
+    (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = lidar=1\n")
+    log = tmp_path / "session.log"
+    with log.open("wb") as out:
+        session = subprocess.Popen(
+            [*PYTEST, "test", f"--junit-xml={junit}"], cwd=root, env=env,
+            stdin=subprocess.DEVNULL, stdout=out, stderr=out,
+        )  # fmt: skip
+    started.append(session)
+    wait_for(ready)
+    refused = _lidar_runner(env, tmp_path)
+    assert refused.returncode == 3, refused.stdout + refused.stderr
+    go.touch()
+    assert session.wait(HUNG) == 0, log.read_text()
+    assert "ros-isolated-test: holding lidar=1 of lidar=1" in log.read_text()
+    assert '<property name="resources" value="lidar=1"' in junit.read_text()
+    after = _lidar_runner(env, tmp_path)
+    assert after.returncode == 0, after.stdout + after.stderr
+
+
+@pytest.mark.parametrize("package", [True, False])
+def test_the_option_wins_over_the_ini_and_turns_isolation_on(
+    tmp_path: Path, resource_env: dict[str, str], package: bool
+) -> None:
+    """Outside a ROS package too: a request needs the plugin (without one it stays off)."""
+    root = project(tmp_path / "pkg", package=package)
+    # A bad ini value: never read when the option is given.
+    (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = lidar\n")
+    done = run_pytest(root, resource_env, "--ros-isolated-test-resources", "camera=1", "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = header_lines(done.stdout)
+    assert lines[1].startswith("ros-isolated-test: holding camera=1 of camera=1"), lines
+    domain = recorded(tmp_path)["ROS_DOMAIN_ID"]
+    assert domain is not None and lines[0].startswith(f"ros-isolated-test: ROS_DOMAIN_ID {domain},")
+
+
+@pytest.mark.parametrize(
+    ("args", "ini", "says"),
+    [
+        (("--ros-isolated-test-resources", "lidar"), "", "--ros-isolated-test-resources: 'lidar'"),
+        ((), "lidar", "ini option ros_isolated_test_resources: 'lidar'"),
+        ((), "lidar=2", "ini option ros_isolated_test_resources: lidar=2 is more than"),
+        # The option is read, not the ini's (good) value.
+        (
+            ("--ros-isolated-test-resources", "lidar=0"),
+            "lidar=1",
+            "--ros-isolated-test-resources: lidar='0' is zero",
+        ),
+    ],
+)
+def test_a_bad_request_is_a_usage_error_naming_the_option(
+    tmp_path: Path, resource_env: dict[str, str], args: tuple[str, ...], ini: str, says: str
+) -> None:
+    root = project(tmp_path / "pkg")
+    (root / "pytest.ini").write_text(f"[pytest]\nros_isolated_test_resources = {ini}\n")
+    done = run_pytest(root, resource_env, *args, "test")
+    assert done.returncode == pytest.ExitCode.USAGE_ERROR, done.stdout + done.stderr
+    assert f"ros-isolated-test: {says}" in done.stderr, done.stderr
+    assert not (tmp_path / "record.json").exists()
+
+
+@pytest.mark.parametrize("capacity", ["lidar=2", "lidar=1"])
+def test_xdist_holds_the_resources_per_worker(
+    tmp_path: Path, resource_env: dict[str, str], capacity: str
+) -> None:
+    """Two workers, lidar=1 each: they fit a capacity of 2; with 1, the second worker waits
+    for the first, which holds it until pytest ends: no lidar in time, exit 3."""
+    root = project(tmp_path / "pkg")
+    env = {
+        **resource_env,
+        "ROS_ISOLATED_TEST_CAPACITY": capacity,
+        "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "2",
+    }
+    done = run_pytest(root, env, "-n", "2", "--ros-isolated-test-resources", "lidar=1", "test")
+    output = done.stdout + done.stderr
+    assert "ros-isolated-test: each xdist worker reserves a ROS_DOMAIN_ID and lidar=1" in output
+    if capacity == "lidar=2":
+        assert done.returncode == 0, output
+    else:
+        assert done.returncode == 3, output
+        assert "crashed" not in output and "restarting" not in output, output
+
+
+def test_under_the_runner_the_plugin_holds_no_resources(
+    tmp_path: Path, resource_env: dict[str, str], one_id: dict[str, str]
+) -> None:
+    """The runner holds what it was asked; the plugin asking again could wait for itself."""
+    root = project(tmp_path / "pkg")
+    env = {**resource_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}
+    argv = [CLI, "run", "--resources", "lidar=1", "--", *PYTEST]
+    done = run_in(root, env, [*argv, "--ros-isolated-test-resources", "lidar=1", "test"])
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (
+        "ros-isolated-test: --ros-isolated-test-resources (lidar=1) not held by the plugin"
+        in done.stdout
+    ), done.stdout
+
+
+#: A test that records the Gazebo partition it ran with, its domain ID and its process.
+PARTITION_TEST = """\
+import json, os
+
+def test_records():
+    names = ("ROS_DOMAIN_ID", "GZ_PARTITION", "IGN_PARTITION")
+    record = {name: os.environ.get(name) for name in names}
+    record["pid"] = os.getpid()
+    with open(os.environ["PLUGIN_RECORD"], "w") as out:
+        json.dump(record, out)
+"""
+
+
+def test_the_session_gets_a_gazebo_partition_of_its_own(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    """The name ``status`` shows for the session's holder record: host, ID, pytest's PID."""
+    from ros_isolated_test.runner import partition
+
+    root = project(tmp_path / "pkg", PARTITION_TEST)
+    junit = tmp_path / "junit.xml"
+    done = run_pytest(root, plain_env, "test", f"--junit-xml={junit}")
+    assert done.returncode == 0, done.stdout + done.stderr
+    seen = json.loads((tmp_path / "record.json").read_text())
+    name = partition.name(os.uname().nodename, int(seen["ROS_DOMAIN_ID"]), seen["pid"])
+    assert seen["GZ_PARTITION"] == seen["IGN_PARTITION"] == name
+    assert f"ros-isolated-test: Gazebo transport partition {name} " in done.stdout
+    assert f'name="gz_partition" value="{name}"' in junit.read_text()
+
+
+@pytest.mark.parametrize("variable", ["GZ_PARTITION", "IGN_PARTITION"])
+def test_explicit_isolation_refuses_a_preset_partition(
+    tmp_path: Path, plain_env: dict[str, str], variable: str
+) -> None:
+    root = project(tmp_path / "pkg", PARTITION_TEST)
+    done = run_pytest(root, {**plain_env, variable: "sim"}, "--ros-isolation", "test")
+    assert done.returncode == pytest.ExitCode.USAGE_ERROR, done.stdout + done.stderr
+    assert f"refusing to run: {variable} is already set to 'sim'" in done.stderr
+    assert not (tmp_path / "record.json").exists()
+
+
+def test_automatic_isolation_keeps_a_preset_partition_and_says_so(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    root = project(tmp_path / "pkg", PARTITION_TEST)
+    done = run_pytest(root, {**plain_env, "GZ_PARTITION": "sim"}, "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    seen = json.loads((tmp_path / "record.json").read_text())
+    assert (seen["GZ_PARTITION"], seen["ROS_DOMAIN_ID"]) == ("sim", None)
+    (line,) = header_lines(done.stdout)
+    assert "GZ_PARTITION is already set to 'sim'" in line and "NOT isolated" in line

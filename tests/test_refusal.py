@@ -188,5 +188,5 @@ def test_disable_ros_isolation_0_does_not_disable(
     assert isolated.returncode == 0, isolated.stdout + isolated.stderr
     first = isolated.stdout.splitlines()[0]
     assert first.startswith("Running with ROS_DOMAIN_ID ")
-    assert f"seen={first.split()[-1]}\n" in isolated.stdout
+    assert f"seen={first.split()[3]}\n" in isolated.stdout
     assert "WARNING" not in isolated.stdout

@@ -48,7 +48,7 @@ COUNTING = (
     'n=$(( $(cat "$1" 2>/dev/null || echo 0) + 1 )); echo "$n" > "$1"; '
     'echo "attempt $n on $ROS_DOMAIN_ID"; exit $((10 + n))'
 )
-DOMAIN_LINE = re.compile(r"^Running with ROS_DOMAIN_ID (\d+)$", re.MULTILINE)
+DOMAIN_LINE = re.compile(r"^Running with ROS_DOMAIN_ID (\d+)\b", re.MULTILINE)
 
 
 @pytest.fixture

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -153,3 +154,63 @@ def test_only_run_reads_the_rerun_variable(env: dict[str, str], tmp_path: Path, 
         assert proc.returncode == 2, proc.stdout + proc.stderr
         assert f"{RERUNS_ENV}='two' is not a number of reruns" in proc.stderr, proc.stderr
         assert load_result(result).only.outcome == "error"
+
+
+RESOURCES_ENV = settings.RESOURCES_ENV
+CAPACITY_ENV = settings.CAPACITY_ENV
+
+
+def test_resources_from_the_variable_or_the_option() -> None:
+    assert (settings.read({}).resources, settings.read({}).capacity) == ({}, {})
+    from_env = settings.read({RESOURCES_ENV: "gpu=1,mem=1G"})
+    assert from_env.resources == {"gpu": 1, "mem": 1 << 30}
+    assert from_env.capacity["gpu"] == 1  # the capacity of every name asked for
+    # The option wins, and its variable is not even read: a bad one breaks nothing.
+    assert settings.read({RESOURCES_ENV: "bogus"}, resources="lidar=1").resources == {"lidar": 1}
+    assert settings.read({RESOURCES_ENV: "bogus"}, resources="").resources == {}
+
+
+def test_the_capacity_holds_every_name_it_sets() -> None:
+    chosen = settings.read({CAPACITY_ENV: "gpu=2,lidar=3"}, resources="gpu=2")
+    assert (chosen.resources, chosen.capacity) == ({"gpu": 2}, {"gpu": 2, "lidar": 3})
+
+
+@pytest.mark.parametrize(
+    ("environ", "option", "says"),
+    [
+        # Above the default capacity: 1 of any other name, this process's CPUs.
+        ({RESOURCES_ENV: "gpu=2"}, {}, f"{RESOURCES_ENV}: gpu=2 is more than this machine's "),
+        ({}, {"resources": "gpu=2"}, "--resources: gpu=2 is more than"),
+        ({}, {"resources": "mem=1048576T"}, "--resources: mem=1048576T is more than"),
+        # Above a capacity set explicitly.
+        (
+            {CAPACITY_ENV: "gpu=2", RESOURCES_ENV: "gpu=3"},
+            {},
+            f"capacity of gpu, 2 (as set in {CAPACITY_ENV})",
+        ),
+        # The origin an entry point names (the RUNNER's --env, a pytest option).
+        ({}, {"resources": "gpu", "resources_origin": "--env X"}, "--env X: 'gpu' is not"),
+        # A bad capacity, whether or not anything is asked.
+        ({CAPACITY_ENV: "gpu"}, {}, f"{CAPACITY_ENV}: 'gpu' is not name=amount"),
+        ({CAPACITY_ENV: "gpu=0"}, {"resources": ""}, f"{CAPACITY_ENV}: gpu='0' is zero"),
+    ],
+)
+def test_a_request_that_cannot_be_had_is_refused_now(
+    environ: dict[str, str], option: dict[str, str], says: str
+) -> None:
+    """Never waited for: no runner could ever give it."""
+    with pytest.raises(SettingsError) as raised:
+        settings.read(environ, **option)  # type: ignore[arg-type]
+    message = str(raised.value)
+    assert says in message and "\n" not in message, message
+
+
+def test_the_default_cpu_capacity_is_a_bound_and_an_explicit_one_lifts_it() -> None:
+    """The control of the refusals above: what fits is taken, at the very bound too."""
+    cpus = len(os.sched_getaffinity(0))
+    assert settings.read({}, resources=f"cpu={cpus}").resources == {"cpu": cpus}
+    with pytest.raises(SettingsError, match=rf"capacity of cpu, {cpus} \(by default\)"):
+        settings.read({}, resources=f"cpu={cpus + 1}")
+    lifted = settings.read({CAPACITY_ENV: f"cpu={cpus + 1}"}, resources=f"cpu={cpus + 1}")
+    assert lifted.capacity == {"cpu": cpus + 1}
+    assert settings.read({CAPACITY_ENV: "gpu=2"}, resources="gpu=2").resources == {"gpu": 2}

@@ -106,3 +106,22 @@ def test_a_squatter_of_a_user_passwd_does_not_name_shows_its_uid(
     started.append(squatter)
     (row,) = [row for row in _rows(one_id) if row["pid"] == squatter.pid]
     assert (row["via"], row["domain_id"], row["user"]) == ("environment", int(domain_id), "4242")
+
+
+def test_status_shows_the_gazebo_partition_a_held_run_gave_its_test(
+    one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
+) -> None:
+    """Rebuilt from the holder record (host, ID, PID): the very name the test has."""
+    seen = tmp_path / "seen"
+    script = f'echo "$GZ_PARTITION" > {seen}.tmp && mv {seen}.tmp {seen} && sleep 60'
+    holder = start_cli(["run", "--", "sh", "-c", script], one_id, tmp_path / "h.log", started)
+    poll_until(seen.exists, "the held test never started")
+    name = seen.read_text().strip()
+    assert name.startswith("rit_"), name  # the control: the test has a partition
+    (row,) = [row for row in _rows(one_id) if row.get("pid") == holder.pid]
+    assert row["via"] == "lock"
+    assert row["gz_partition"] == name
+    table = run_cli(["status"], one_id).stdout
+    assert "GZ_PARTITION" in table.splitlines()[0], table
+    (line,) = [line for line in table.splitlines() if f" {holder.pid} " in line]
+    assert f" {name} " in line, table

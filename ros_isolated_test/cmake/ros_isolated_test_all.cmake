@@ -1,6 +1,9 @@
-# ros_isolated_test_all([RERUNS n]): one line that puts every test of the package on our
-# RUNNER; with RERUNS, each of them runs again up to n times when it fails (every attempt
-# kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS.
+# ros_isolated_test_all([RERUNS n] [RESOURCES spec]): one line that puts every test of the
+# package on our RUNNER; with RERUNS, each of them runs again up to n times when it fails
+# (every attempt kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS;
+# with RESOURCES (e.g. cpu=2,mem=4G), each of them holds those machine resources with its
+# domain ID (waiting until they are free), unless its own ENV sets
+# ROS_ISOLATED_TEST_RESOURCES. A test with a RUNNER of its own gets neither.
 #
 # ament_add_gtest, ament_add_gmock, ament_add_pytest_test, add_launch_test and third-party
 # macros all register their tests through ament_add_test, whose RUNNER defaults to ament's
@@ -29,24 +32,25 @@ macro(ros_isolated_test_all)
     # A macro, so what find_package() sets stays in the caller's scope.
     find_package(ament_cmake_test REQUIRED)
   endif()
-  _ros_isolated_test_all_reruns(${ARGN})
+  _ros_isolated_test_all_options(${ARGN})
   _ros_isolated_test_wrap_ament_add_test()
 endmacro()
 
-# RERUNS of ros_isolated_test_all(), kept for the tests added from now on.
-function(_ros_isolated_test_all_reruns)
-  cmake_parse_arguments(_rit "" "RERUNS" "" ${ARGN})
+# RERUNS and RESOURCES of ros_isolated_test_all(), checked and kept for the tests added
+# from now on (a later call replaces only what it names).
+function(_ros_isolated_test_all_options)
+  cmake_parse_arguments(_rit "" "RERUNS;RESOURCES" "" ${ARGN})
   if(_rit_UNPARSED_ARGUMENTS)
     message(FATAL_ERROR "ros_isolated_test_all(): unknown argument(s) "
-      "'${_rit_UNPARSED_ARGUMENTS}'; it takes RERUNS <n> only")
+      "'${_rit_UNPARSED_ARGUMENTS}'; it takes RERUNS <n> and RESOURCES <spec> only")
   endif()
-  if("RERUNS" IN_LIST _rit_KEYWORDS_MISSING_VALUES)
-    set(_rit_RERUNS "")
-  endif()
-  if(DEFINED _rit_RERUNS)
-    _ros_isolated_test_check_reruns("${_rit_RERUNS}")
-    set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_RERUNS "${_rit_RERUNS}")
-  endif()
+  _ros_isolated_test_env(_checked "${_rit_KEYWORDS_MISSING_VALUES}" "${_rit_RERUNS}"
+    "${_rit_RESOURCES}")
+  foreach(_keyword RERUNS RESOURCES)
+    if(NOT "${_rit_${_keyword}}" STREQUAL "")
+      set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_${_keyword} "${_rit_${_keyword}}")
+    endif()
+  endforeach()
 endfunction()
 
 # Defines the wrapper. A function, not a macro: a macro would substitute its own ${ARGN}
@@ -86,15 +90,15 @@ function(_ros_isolated_test_wrap_ament_add_test)
       "OUTPUT_FILE;RESULT_FILE;RUNNER;SKIP_RETURN_CODE;TIMEOUT;WORKING_DIRECTORY"
       "APPEND_ENV;APPEND_LIBRARY_DIRS;COMMAND;ENV"
       ${ARGN})
-    # RERUNS of ros_isolated_test_all() first: a variable the call's own ENV sets comes
-    # later and wins (ament_add_test passes ENV on as --env, where the last value wins).
+    # RERUNS and RESOURCES of ros_isolated_test_all() first: a variable the call's own ENV
+    # sets comes later and wins (ament_add_test passes ENV on as --env, where the last
+    # value wins).
     get_property(_reruns GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_RERUNS)
-    set(_default_env "")
-    if(NOT "${_reruns}" STREQUAL "")
-      set(_default_env ENV "ROS_ISOLATED_TEST_RERUNS=${_reruns}")
-    endif()
+    get_property(_resources GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_RESOURCES)
+    _ros_isolated_test_env(_default_env "" "${_reruns}" "${_resources}")
     if(_rit_RUNNER)
-      _ament_add_test("${testname}" ${ARGN})  # another runner: RERUNS is ours, not its
+      # Another runner: RERUNS and RESOURCES are ours, not its.
+      _ament_add_test("${testname}" ${ARGN})
     else()
       _ros_isolated_test_runner(_runner)
       # Last, so it also replaces an empty RUNNER, which ament_add_test reads as "default".

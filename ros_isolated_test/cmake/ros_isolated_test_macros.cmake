@@ -1,9 +1,12 @@
 # ros_isolated_add_*: the ament and launch_testing test macros with ros-isolated-test as
-# RUNNER. Each takes exactly the arguments of the macro it wraps, and one more:
+# RUNNER. Each takes exactly the arguments of the macro it wraps, and two more:
 # RERUNS <n> runs a failed test again up to n times, every attempt kept in its result file
-# (ENV ROS_ISOLATED_TEST_RERUNS=<n>, which the RUNNER reads). Our RUNNER comes first, so a
-# RUNNER the call names itself comes later and wins (cmake_parse_arguments keeps the last
-# value).
+# (ENV ROS_ISOLATED_TEST_RERUNS=<n>, which the RUNNER reads);
+# RESOURCES <spec> (e.g. RESOURCES cpu=2,mem=4G,gpu=1) makes the test hold those machine
+# resources with its domain ID, waiting until every other runner on the machine has left
+# enough of them free (ENV ROS_ISOLATED_TEST_RESOURCES=<spec>, which the RUNNER checks).
+# Our RUNNER comes first, so a RUNNER the call names itself comes later and wins
+# (cmake_parse_arguments keeps the last value).
 
 # The RUNNER script's path, wherever find_package(ros_isolated_test) was called.
 function(_ros_isolated_test_runner var)
@@ -15,19 +18,35 @@ function(_ros_isolated_test_runner var)
   set(${var} "${_runner}" PARENT_SCOPE)
 endfunction()
 
-# The call's arguments in ${var}, RERUNS <n> turned into ENV ROS_ISOLATED_TEST_RERUNS=<n>.
+# The call's arguments in ${var}, RERUNS <n> and RESOURCES <spec> turned into
+# ENV ROS_ISOLATED_TEST_RERUNS=<n> ROS_ISOLATED_TEST_RESOURCES=<spec>.
 # Last: ament_add_test passes ENV on as --env, where the last value of a variable wins.
 function(_ros_isolated_test_arguments var)
-  cmake_parse_arguments(_rit "" "RERUNS" "" ${ARGN})
+  cmake_parse_arguments(_rit "" "RERUNS;RESOURCES" "" ${ARGN})
   set(_arguments ${_rit_UNPARSED_ARGUMENTS})
-  if("RERUNS" IN_LIST _rit_KEYWORDS_MISSING_VALUES)
-    set(_rit_RERUNS "")
-  endif()
-  if(DEFINED _rit_RERUNS)
-    _ros_isolated_test_check_reruns("${_rit_RERUNS}")
-    list(APPEND _arguments ENV "ROS_ISOLATED_TEST_RERUNS=${_rit_RERUNS}")
-  endif()
+  _ros_isolated_test_env(_env "${_rit_KEYWORDS_MISSING_VALUES}" "${_rit_RERUNS}"
+    "${_rit_RESOURCES}")
+  list(APPEND _arguments ${_env})
   set(${var} "${_arguments}" PARENT_SCOPE)
+endfunction()
+
+# ENV ROS_ISOLATED_TEST_RERUNS=<reruns> ROS_ISOLATED_TEST_RESOURCES=<resources> in ${var},
+# each checked, for those given: a non-empty value, or an empty one whose keyword is in
+# ${missing} (cmake_parse_arguments' KEYWORDS_MISSING_VALUES: "RERUNS" with no value).
+function(_ros_isolated_test_env var missing reruns resources)
+  set(_env "")
+  if(NOT reruns STREQUAL "" OR "RERUNS" IN_LIST missing)
+    _ros_isolated_test_check_reruns("${reruns}")
+    list(APPEND _env "ROS_ISOLATED_TEST_RERUNS=${reruns}")
+  endif()
+  if(NOT resources STREQUAL "" OR "RESOURCES" IN_LIST missing)
+    _ros_isolated_test_check_resources("${resources}")
+    list(APPEND _env "ROS_ISOLATED_TEST_RESOURCES=${resources}")
+  endif()
+  if(_env)
+    set(_env ENV ${_env})
+  endif()
+  set(${var} "${_env}" PARENT_SCOPE)
 endfunction()
 
 # Stops configuring when RERUNS is no whole number: the test would fail at every run.
@@ -38,12 +57,22 @@ function(_ros_isolated_test_check_reruns value)
   endif()
 endfunction()
 
+# Stops configuring when RESOURCES is clearly no request (empty, no name=amount): the test
+# would fail at every run. The RUNNER checks the rest (names, amounts, the capacity).
+function(_ros_isolated_test_check_resources value)
+  if(NOT value MATCHES "=")
+    message(FATAL_ERROR "ros_isolated_test: RESOURCES '${value}' is not a request of "
+      "resources; pass name=amount pairs joined by commas (e.g. RESOURCES cpu=2,mem=4G,gpu=1)")
+  endif()
+endfunction()
+
 # Macros, not functions: a macro runs in the caller's scope, so what find_package() sets
 # when a macro finds ament_cmake_gtest, ament_cmake_pytest, ... outlives the call, and the
 # next call neither finds the package again nor loads its files a second time. Their own
 # variables carry the _ros_isolated_test prefix, as they land in the caller's scope too.
 
-# ros_isolated_add_test(testname COMMAND ... [RERUNS n] [any ament_add_test argument])
+# ros_isolated_add_test(testname COMMAND ... [RERUNS n] [RESOURCES spec]
+#                       [any ament_add_test argument])
 macro(ros_isolated_add_test _ros_isolated_test_name)
   _ros_isolated_test_runner(_ros_isolated_test_runner_path)
   _ros_isolated_test_arguments(_ros_isolated_test_arguments ${ARGN})
@@ -51,7 +80,8 @@ macro(ros_isolated_add_test _ros_isolated_test_name)
     ${_ros_isolated_test_arguments})
 endmacro()
 
-# ros_isolated_add_gtest(target source... [any ament_add_gtest argument])
+# ros_isolated_add_gtest(target source... [RERUNS n] [RESOURCES spec]
+#                        [any ament_add_gtest argument])
 macro(ros_isolated_add_gtest _ros_isolated_test_target)
   if(NOT COMMAND ament_add_gtest)
     find_package(ament_cmake_gtest REQUIRED)
@@ -62,7 +92,8 @@ macro(ros_isolated_add_gtest _ros_isolated_test_target)
     ${_ros_isolated_test_arguments})
 endmacro()
 
-# ros_isolated_add_gmock(target source... [any ament_add_gmock argument])
+# ros_isolated_add_gmock(target source... [RERUNS n] [RESOURCES spec]
+#                        [any ament_add_gmock argument])
 macro(ros_isolated_add_gmock _ros_isolated_test_target)
   if(NOT COMMAND ament_add_gmock)
     find_package(ament_cmake_gmock REQUIRED)
@@ -73,7 +104,8 @@ macro(ros_isolated_add_gmock _ros_isolated_test_target)
     ${_ros_isolated_test_arguments})
 endmacro()
 
-# ros_isolated_add_pytest_test(testname path [any ament_add_pytest_test argument])
+# ros_isolated_add_pytest_test(testname path [RERUNS n] [RESOURCES spec]
+#                              [any ament_add_pytest_test argument])
 macro(ros_isolated_add_pytest_test _ros_isolated_test_name _ros_isolated_test_path)
   if(NOT COMMAND ament_add_pytest_test)
     find_package(ament_cmake_pytest REQUIRED)
@@ -84,7 +116,7 @@ macro(ros_isolated_add_pytest_test _ros_isolated_test_name _ros_isolated_test_pa
     RUNNER "${_ros_isolated_test_runner_path}" ${_ros_isolated_test_arguments})
 endmacro()
 
-# ros_isolated_add_launch_test(file [any add_launch_test argument])
+# ros_isolated_add_launch_test(file [RERUNS n] [RESOURCES spec] [any add_launch_test argument])
 macro(ros_isolated_add_launch_test _ros_isolated_test_file)
   if(NOT COMMAND add_launch_test)
     find_package(launch_testing_ament_cmake REQUIRED)

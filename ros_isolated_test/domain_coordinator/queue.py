@@ -13,6 +13,9 @@ The shared queue folder can be planted too (a file, a symlink, another user's fo
 others may not write or may empty): a runner then queues in a folder of its own user
 (``queue.uid<UID>``), as it falls back to a lock file of its own, and says so. Every
 runner reads every such folder, so arrival order holds across all of them.
+
+The same folders, under another name, hold what runners hold of machine resources
+(``holdings``): a hold is a ticket kept for the test's whole life.
 """
 
 from __future__ import annotations
@@ -47,6 +50,9 @@ from ros_isolated_test.process import proc
 
 QUEUE_DIR = "queue"
 _TICKET = ".ticket"
+#: Before ``.ticket`` in the name of a ticket that asks for resources: the others are
+#: ID-only, and a runner reads no record to know that.
+RESOURCE_MARK = ".r"
 
 
 class Ticket:
@@ -63,14 +69,27 @@ class Ticket:
         """Live tickets older than this one, in every queue folder."""
         return sum(1 for path in self.queue.live_tickets() if path.name < self.name)
 
+    def close(self) -> None:
+        """Leave the queue (or give up the hold): the ticket goes, then its lock."""
+        with contextlib.suppress(OSError):
+            os.unlink(self.path)
+        os.close(self.fd)
+
 
 class Waiter:
     """A runner waiting for an ID, as its ticket describes it."""
 
-    __slots__ = ("command", "host", "pid", "position", "since", "user")
+    __slots__ = ("command", "host", "pid", "position", "resources", "since", "user")
 
     def __init__(
-        self, position: int, pid: int, user: str, command: str, since: float, host: str
+        self,
+        position: int,
+        pid: int,
+        user: str,
+        command: str,
+        since: float,
+        host: str,
+        resources: dict[str, int] | None = None,
     ) -> None:
         #: 1 for the head of the queue, the next to get an ID.
         self.position = position
@@ -79,6 +98,8 @@ class Waiter:
         self.command = command
         self.since = since
         self.host = host
+        #: What it asks for besides an ID ({name: amount}; empty: nothing).
+        self.resources = resources or {}
 
     @property
     def since_iso(self) -> str:
@@ -94,11 +115,15 @@ class Waiter:
             "command": self.command,
             "started": self.since,
             "host": self.host,
+            "resources": dict(self.resources),
         }
 
 
-def _record(command: Sequence[str] | None) -> bytes:
-    """The ticket record of this waiter, as JSON (no ``json`` import: a runner writes it)."""
+def _record(command: Sequence[str] | None, extra: str = "") -> bytes:
+    """The ticket record of this waiter, as JSON (no ``json`` import: a runner writes it).
+
+    ``extra``: more fields, already JSON (``"name": value, ...``).
+    """
     words = list(command) if command is not None else list(sys.argv)
     fields = (
         f'"pid": {os.getpid()}',
@@ -106,6 +131,7 @@ def _record(command: Sequence[str] | None) -> bytes:
         f'"command": {json_string(shlex.join(words))}',
         f'"started": {time.time()!r}',
         f'"host": {json_string(os.uname().nodename)}',
+        *((extra,) if extra else ()),
     )
     return ("{" + ", ".join(fields) + "}").encode("utf-8")
 
@@ -116,6 +142,7 @@ def _from_name(name: str, limit: int) -> tuple[int, float]:
     0 for what it does not hold.
     """
     arrived, _dash, pid_text = name[: -len(_TICKET)].partition("-")
+    pid_text = pid_text.removesuffix(RESOURCE_MARK)
     pid = 0
     if pid_text.isascii() and pid_text.isdigit():  # int() refuses some other digits
         pid = record_pid(int(pid_text), limit) or 0
@@ -153,11 +180,12 @@ def _unusable(path: Path, own: bool) -> str | None:
 class Queue:
     """The waiting runners of one lock directory."""
 
-    def __init__(self, lock_dir: Path) -> None:
+    def __init__(self, lock_dir: Path, folder: str = QUEUE_DIR) -> None:
         self.lock_dir = lock_dir
+        self.folder = folder
         #: The shared queue folder, and this user's own for when it was planted.
-        self.path = lock_dir / QUEUE_DIR
-        self.own_path = lock_dir / f"{QUEUE_DIR}.uid{os.getuid()}"
+        self.path = lock_dir / folder
+        self.own_path = lock_dir / f"{folder}.uid{os.getuid()}"
         #: Set by :meth:`ticket` when the shared folder was unusable: one line to show.
         self.problem: str | None = None
 
@@ -165,7 +193,7 @@ class Queue:
         """Every queue folder: the shared one and each user's own (never through a link)."""
         found = [self.path]
         with contextlib.suppress(OSError):
-            prefix = f"{QUEUE_DIR}.uid"
+            prefix = f"{self.folder}.uid"
             for entry in os.scandir(self.lock_dir):
                 if entry.name.startswith(prefix):
                     found.append(Path(entry.path))
@@ -192,7 +220,7 @@ class Queue:
         if not os.path.lexists(self.path):
             return None  # the first runner to queue creates it
         why = _unusable(self.path, own=False)
-        return None if why is None else _fallback_note(self.path, why, self.own_path)
+        return None if why is None else _fallback_note(self.path, why, self.own_path, self.folder)
 
     def waiters(self) -> list[Waiter]:
         """Every live waiter, first in line first.
@@ -213,13 +241,15 @@ class Queue:
                 data = parse_record(read_small_file(path))
             except (OSError, ValueError):  # unreadable, not a regular file, not UTF-8
                 data = None
+            wanted: dict[str, int] = {}
             if data is not None:
                 # Field by field: a planted record cannot make a valid field disappear.
                 command = record_text(data.get("command"), LONG_TEXT) or command
                 host = record_text(data.get("host")) or host
                 pid = record_pid(data.get("pid"), limit) or pid
                 since = record_time(data.get("started")) or since
-            found.append(Waiter(position, pid, owner, command, since, host))
+                wanted = record_amounts(data.get("resources"))
+            found.append(Waiter(position, pid, owner, command, since, host, wanted))
         return found
 
     def waiting(self) -> bool:
@@ -243,33 +273,47 @@ class Queue:
             os.close(fd)
 
     @contextlib.contextmanager
-    def ticket(self, command: Sequence[str] | None = None) -> Iterator[Ticket | None]:
+    def ticket(
+        self, command: Sequence[str] | None = None, extra: str = "", marked: bool = False
+    ) -> Iterator[Ticket | None]:
         """Take a place at the end of the queue for the ``with`` block.
 
         ``command`` is recorded in the ticket for ``status`` (default: this process's
         own command line). When the shared folder is unusable (something planted there)
         the ticket goes into this user's own folder and :attr:`problem` says so; when
         that fails too, it yields None: the runner then still waits, only without the
-        first-come-first-served order.
+        first-come-first-served order. ``extra`` adds fields to the record; ``marked``
+        names the ticket as one asking for resources (:data:`RESOURCE_MARK`).
         """
-        name = f"{time.time_ns():020d}-{os.getpid()}{_TICKET}"
+        ticket = self.enter(command, extra, marked)
+        if ticket is None:
+            yield None
+            return
+        try:
+            yield ticket
+        finally:
+            ticket.close()
+
+    def enter(
+        self, command: Sequence[str] | None = None, extra: str = "", marked: bool = False
+    ) -> Ticket | None:
+        """A ticket held until :meth:`Ticket.close` (see :meth:`ticket`); None if none was made."""
+        mark = RESOURCE_MARK if marked else ""
+        name = f"{time.time_ns():020d}-{os.getpid()}{mark}{_TICKET}"
+        record = _record(command, extra)
         why = self._prepare(self.path, own=False)
-        held = self._take(self.path / name, command) if why is None else None
+        held = self._take(self.path / name, record) if why is None else None
         if held is None:
             why = why or "tickets cannot be created in it"
             own_why = self._prepare(self.own_path, own=True)
-            held = self._take(self.own_path / name, command) if own_why is None else None
-            self.problem = _fallback_note(self.path, why, self.own_path if held else None)
+            held = self._take(self.own_path / name, record) if own_why is None else None
+            self.problem = _fallback_note(
+                self.path, why, self.own_path if held else None, self.folder
+            )
         if held is None:
-            yield None
-            return
+            return None
         path, fd = held
-        try:
-            yield Ticket(self, path, fd)
-        finally:
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-            os.close(fd)
+        return Ticket(self, path, fd)
 
     @staticmethod
     def _prepare(folder: Path, own: bool) -> str | None:
@@ -285,7 +329,7 @@ class Queue:
         return _unusable(folder, own)
 
     @staticmethod
-    def _take(path: Path, command: Sequence[str] | None) -> tuple[Path, int] | None:
+    def _take(path: Path, record: bytes) -> tuple[Path, int] | None:
         """A locked ticket at ``path`` with our record: (path, descriptor), or None."""
         fd: int | None = None
         # Locked under a name nobody looks at, then renamed into the queue: an
@@ -300,7 +344,7 @@ class Queue:
             with contextlib.suppress(OSError):
                 # Our own new file (O_EXCL): written before it appears in the queue. A
                 # full disk only costs status the record, never the place in line.
-                os.write(fd, _record(command))
+                os.write(fd, record)
             wait_lock(fd)
             os.rename(staging, path)
         except OSError:
@@ -319,14 +363,48 @@ def _is_directory(path: Path) -> bool:
         return False
 
 
-def _fallback_note(shared: Path, why: str, own: Path | None) -> str:
+def _fallback_note(shared: Path, why: str, own: Path | None, folder: str = QUEUE_DIR) -> str:
     """One line naming the planted path and what the runners do about it."""
-    where = (
-        f"runners of this user queue in {own} instead (first come, first served among them)"
-        if own is not None
-        else "runners wait without first come, first served"
-    )
+    if folder != QUEUE_DIR:
+        where = (
+            f"runners of this user keep their holds in {own} instead"
+            if own is not None
+            else "this runner could not record its hold"
+        )
+        kind = f"{folder} folder"
+    else:
+        where = (
+            f"runners of this user queue in {own} instead (first come, first served among them)"
+            if own is not None
+            else "runners wait without first come, first served"
+        )
+        kind = "queue folder"
     return (
-        f"the shared queue folder {display_text(str(shared), SHORT_TEXT)} is unusable "
-        f"({why}; planted?): {where}; remove it to restore the shared queue"
+        f"the shared {kind} {display_text(str(shared), SHORT_TEXT)} is unusable "
+        f"({why}; planted?): {where}; remove it to restore the shared {kind}"
     )
+
+
+def record_amounts(value: object) -> dict[str, int]:
+    """A record's resource amounts ({name: amount}) as far as they are valid; {} otherwise.
+
+    A planted record may hold anything: names and amounts as a request allows, at most
+    16 of them.
+    """
+    from ros_isolated_test.domain_coordinator.resources import MAX_AMOUNT, MAX_NAME
+
+    if not isinstance(value, dict):
+        return {}
+    amounts: dict[str, int] = {}
+    for name, amount in list(value.items())[:16]:
+        if (
+            isinstance(name, str)
+            and 0 < len(name) <= MAX_NAME
+            and name.isascii()
+            and name.replace("_", "").replace("-", "").isalnum()
+            and name == name.lower()
+            and type(amount) is int
+            and 0 < amount <= MAX_AMOUNT
+        ):
+            amounts[name] = amount
+    return amounts

@@ -13,6 +13,9 @@ and our reservation of that ID exclude each other. An ID whose last test left
 survivors stays taken while they live (see ``block``), as does one a DDS participant
 is bound to (``participants``) or, after a holder died holding it, one a process
 still carries in ROS_DOMAIN_ID (``escaped``).
+
+A runner that asks for machine resources (``holdings``) takes them together with its
+ID, all or nothing, and gives both back together.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, participants, port_guard
+from ros_isolated_test.domain_coordinator import holder, holdings, participants, port_guard
 from ros_isolated_test.domain_coordinator.block import blocking_survivors, write_block
 from ros_isolated_test.domain_coordinator.escaped import escaped_processes
 from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
@@ -35,7 +38,8 @@ from ros_isolated_test.domain_coordinator.lock_dir import (
     lock_dir_from_env,
 )
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
-from ros_isolated_test.domain_coordinator.queue import Queue
+from ros_isolated_test.domain_coordinator.queue import RESOURCE_MARK, Queue, Ticket
+from ros_isolated_test.domain_coordinator.resources import describe
 from ros_isolated_test.process import proc
 
 #: Lock files are shared by all users: each must be able to open and flock them.
@@ -49,6 +53,10 @@ _DIRECTORY_ERRORS = frozenset({errno.ENOSPC, errno.EROFS, errno.EDQUOT})
 
 class PoolExhaustedError(RuntimeError):
     """No ID became free in time; the message says who holds them and what to do."""
+
+
+class ResourcesBusyError(PoolExhaustedError):
+    """The resources asked for did not come free in time (exit code as for no ID)."""
 
 
 class _Unusable(Exception):
@@ -78,7 +86,17 @@ if TYPE_CHECKING:
 class Reservation:
     """A held domain ID. Release it with :meth:`release` (or leave the ``with`` block)."""
 
-    __slots__ = ("domain_id", "lock_dir", "lock_fd", "port", "record", "released", "unclean")
+    __slots__ = (
+        "domain_id",
+        "holding",
+        "lock_dir",
+        "lock_fd",
+        "port",
+        "record",
+        "released",
+        "unclean",
+        "waited",
+    )
 
     def __init__(
         self,
@@ -98,6 +116,10 @@ class Reservation:
         #: Set when survivors could not be recorded: the release then says nothing is left
         #: of the test only if that is true (see :meth:`release`).
         self.unclean = False
+        #: The hold of the resources taken with the ID (``holdings``), given back with it.
+        self.holding: Ticket | None = None
+        #: Seconds spent waiting for the ID (and the resources) before it was held.
+        self.waited = 0.0
 
     def __repr__(self) -> str:
         return f"Reservation(domain_id={self.domain_id}, released={self.released})"
@@ -147,9 +169,27 @@ class Reservation:
         self._let_go()
 
     def _let_go(self) -> None:
+        if self.holding is not None:
+            self.holding.close()
         self.port.close()
         if self.lock_fd is not None:
             os.close(self.lock_fd)
+
+
+class ResourceHold:
+    """Resources held without a domain ID (isolation disabled): released like a reservation."""
+
+    __slots__ = ("holding", "released", "waited")
+
+    def __init__(self, holding: Ticket) -> None:
+        self.holding = holding
+        self.waited = 0.0
+        self.released = False
+
+    def release(self) -> None:
+        if not self.released:
+            self.released = True
+            self.holding.close()
 
 
 def _open_lock_file(path: Path) -> int:
@@ -274,9 +314,21 @@ def _spread(remaining: list[int], released: dict[int, float]) -> list[int]:
 class DomainCoordinator:
     """Hands out domain IDs from a pool, machine-wide, through a shared lock directory."""
 
-    def __init__(self, lock_dir: Path | None = None, pool: Sequence[int] | None = None) -> None:
+    def __init__(
+        self,
+        lock_dir: Path | None = None,
+        pool: Sequence[int] | None = None,
+        resources: dict[str, int] | None = None,
+        capacity: dict[str, int] | None = None,
+    ) -> None:
         self.lock_dir = lock_dir if lock_dir is not None else lock_dir_from_env()
         self.pool = tuple(pool) if pool is not None else pool_from_env()
+        #: What every reservation of this coordinator holds besides its ID (``holdings``).
+        self.resources = dict(resources or {})
+        #: The capacity of those resources (settings): every runner must be given the same.
+        self.capacity = dict(capacity or {})
+        #: Why the last attempt got nothing, when resources were the reason (for messages).
+        self._short: str | None = None
 
     def candidates(self, released: dict[int, float] | None = None) -> list[int]:
         """The pool, least recently released first.
@@ -349,37 +401,128 @@ class DomainCoordinator:
         wait_timeout: float = 0.0,
         on_wait: Callable[[str], None] | None = None,
     ) -> Reservation:
-        """Reserve an ID, waiting first come, first served while the pool is full."""
+        """Reserve an ID (and the resources), waiting first come, first served while taken."""
+        taken = self._wait(command, wait_timeout, on_wait, domain=True)
+        assert isinstance(taken, Reservation)
+        return taken
+
+    def hold_resources(
+        self,
+        command: Sequence[str],
+        wait_timeout: float = 0.0,
+        on_wait: Callable[[str], None] | None = None,
+    ) -> ResourceHold:
+        """Hold the resources without an ID (isolation disabled), waiting like :meth:`acquire`."""
+        taken = self._wait(command, wait_timeout, on_wait, domain=False)
+        assert isinstance(taken, ResourceHold)
+        return taken
+
+    def _wait(
+        self,
+        command: Sequence[str],
+        wait_timeout: float,
+        on_wait: Callable[[str], None] | None,
+        domain: bool,
+    ) -> Reservation | ResourceHold:
         # Refused before anything is read or written through a planted path (the queue).
         ensure_lock_dir(self.lock_dir)
         queue = Queue(self.lock_dir)
-        # Queue behind earlier waiters, unless not waiting at all: then any free ID will do.
-        if wait_timeout <= 0 or not queue.waiting():
-            reservation = self.try_reserve(command)
-            if reservation is not None:
-                return reservation
-        if wait_timeout <= 0:
-            raise PoolExhaustedError(self._exhausted("", 0.0))
         start = time.monotonic()
+        # Not waiting at all: any free ID will do. Otherwise behind every earlier waiter
+        # (no ticket yet: behind them all), unless nobody waits.
+        before = "" if wait_timeout <= 0 or not queue.waiting() else None
+        taken, _turn = self._attempt(command, queue, before, domain)
+        if taken is not None:
+            return taken
+        if wait_timeout <= 0:
+            raise self._gave_up("", 0.0)
         told = 0.0
-        with queue.ticket(command) as ticket:
+        extra = ""
+        if self.resources:
+            extra = holdings.ticket_fields(self.resources, self.capacity, domain)
+        with queue.ticket(command, extra, marked=bool(self.resources)) as ticket:
             if queue.problem is not None and on_wait is not None:
                 on_wait(queue.problem)  # once: the planted path, and what we do instead
             while True:
                 waited = time.monotonic() - start
-                ahead = ticket.ahead() if ticket is not None else 0
-                if ahead == 0:
-                    reservation = self.try_reserve(command)
-                    if reservation is not None:
-                        return reservation
+                # Without a ticket (none could be made) a runner waits out of order.
+                name = ticket.name if ticket is not None else ""
+                taken, turn = self._attempt(command, queue, name, domain)
+                if taken is not None:
+                    taken.waited = time.monotonic() - start
+                    return taken
                 if waited >= wait_timeout:
-                    raise PoolExhaustedError(self._exhausted("waited", waited))
+                    raise self._gave_up("waited", waited)
                 if on_wait is not None and (told == 0.0 or waited - told >= 10.0):
                     told = waited or 0.001
+                    ahead = ticket.ahead() if ticket is not None else 0
                     on_wait(self._waiting_message(ahead, waited, wait_timeout))
-                # The head of the queue looks often (an attempt is a few lock calls);
-                # the rest only need to notice when they become the head.
-                time.sleep(HEAD_POLL_SECONDS if ahead == 0 else QUEUE_POLL_SECONDS)
+                # A runner whose turn it is looks often (an attempt is a few lock calls);
+                # the rest only need to notice when their turn comes.
+                time.sleep(HEAD_POLL_SECONDS if turn else QUEUE_POLL_SECONDS)
+
+    def _attempt(
+        self, command: Sequence[str], queue: Queue, before: str | None, domain: bool
+    ) -> tuple[Reservation | ResourceHold | None, bool]:
+        """One try, in turn: (what was taken or None, whether it was our turn to try).
+
+        ``before``: our ticket's name; None for a newcomer behind every waiter; "" to
+        take whatever is free regardless of waiters.
+        """
+        self._short = None
+        if not self.resources:
+            if before != "" and self._id_ahead(queue, before):
+                return None, False
+            return self.try_reserve(command), True
+        with holdings.mutex(self.lock_dir):
+            board = holdings.picture(self.lock_dir, queue, self.resources, self.capacity)
+            mine = holdings.Demand(before or "", self.resources, domain)
+            fits, turn = board.may_go(mine, before)
+            if not fits:
+                self._short = board.shortage(self.resources)
+                return None, False
+            if not turn:
+                return None, False
+            reservation = self.try_reserve(command) if domain else None
+            if domain and reservation is None:
+                return None, True
+            holding = holdings.hold(
+                self.lock_dir,
+                command,
+                self.resources,
+                self.capacity,
+                None if reservation is None else reservation.domain_id,
+            )
+            if holding is None:
+                if reservation is not None:
+                    reservation.release()
+                raise LockDirError(
+                    f"cannot record a hold of {describe(self.resources)} in {self.lock_dir} "
+                    "(a runner that dies must leave nothing held); free space there, or "
+                    "point ROS_ISOLATED_TEST_LOCK_DIR elsewhere"
+                )
+            if reservation is None:
+                return ResourceHold(holding), True
+            reservation.holding = holding
+            return reservation, True
+
+    def _id_ahead(self, queue: Queue, before: str | None) -> bool:
+        """Whether an earlier waiter is to get an ID first (so an ID-only runner waits).
+
+        Tickets that ask for resources count only while what they ask for is free: a
+        waiter held up by a GPU holds up nobody who asks for an ID alone. Their records
+        are read only when such tickets exist.
+        """
+        earlier = [
+            path.name for path in queue.live_tickets() if before is None or path.name < before
+        ]
+        if not earlier:
+            return False
+        if not any(name.endswith(RESOURCE_MARK + ".ticket") for name in earlier):
+            return True
+        board = holdings.picture(self.lock_dir, queue, {}, {})
+        _fits, turn = board.may_go(holdings.Demand(before or "~", {}, True), before)
+        return not turn
 
     @contextlib.contextmanager
     def reserve(
@@ -401,11 +544,27 @@ class DomainCoordinator:
         return describe_holders(self.lock_dir, self.pool)
 
     def _waiting_message(self, ahead: int, waited: float, limit: float) -> str:
+        if self._short is not None:
+            return (
+                f"waiting for {describe(self.resources)} ({waited:.1f} s of {limit:g} s, "
+                f"{ahead} runner(s) ahead): {self._short}"
+            )
         return (
             f"waiting for a free ROS_DOMAIN_ID ({waited:.1f} s of {limit:g} s, "
             f"{ahead} runner(s) ahead): all {len(self.pool)} IDs of the pool are in use: "
             f"{self._holders()}"
         )
+
+    def _gave_up(self, how: str, waited: float) -> PoolExhaustedError:
+        """The error for a runner that got nothing: resources or the pool."""
+        if self._short is not None:
+            spent = f"after waiting {waited:.0f} s, " if how else ""
+            return ResourcesBusyError(
+                f"{spent}{describe(self.resources)} is not free: {self._short} (see "
+                "ros-isolated-test status); run fewer tests at once, ask for less, or wait "
+                "longer with --wait-timeout / ROS_ISOLATED_TEST_WAIT_TIMEOUT"
+            )
+        return PoolExhaustedError(self._exhausted(how, waited))
 
     def _exhausted(self, how: str, waited: float) -> str:
         spent = f"after waiting {waited:.0f} s, " if how else ""

@@ -2,6 +2,8 @@
 
 A preset ROS_DOMAIN_ID is refused rather than respected: upstream silently runs the test
 on it, so a developer's exported ID turns a parallel run into crosstalk nobody notices.
+A preset Gazebo partition (GZ_PARTITION, IGN_PARTITION) is refused for the same reason:
+the runner gives each test one of its own (see ``partition``).
 """
 
 from __future__ import annotations
@@ -9,7 +11,8 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 
-from ros_isolated_test.runner import discovery
+from ros_isolated_test.domain_coordinator.resources import RESOURCES_ENV
+from ros_isolated_test.runner import discovery, partition
 from ros_isolated_test.runner.request import EnvAssignment
 from ros_isolated_test.runner.settings import (
     DISABLE_VAR,
@@ -36,11 +39,16 @@ def held_for_us(environ: Mapping[str, str]) -> bool:
 class RefusedError(Exception):
     """Isolation cannot be promised; nothing may run. The message is one line."""
 
+    def __init__(self, message: str, variable: str = DOMAIN_VAR) -> None:
+        super().__init__(message)
+        #: The preset variable that was refused (the pytest plugin names it).
+        self.variable = variable
+
 
 class Policy:
     """What the runner decided before anything runs."""
 
-    __slots__ = ("discovery", "env", "isolate", "notes")
+    __slots__ = ("discovery", "env", "gz_partition", "isolate", "notes")
 
     def __init__(
         self,
@@ -48,6 +56,7 @@ class Policy:
         env: dict[str, str],
         notes: tuple[str, ...],
         discovery: discovery.Discovery | None = None,
+        gz_partition: bool = False,
     ) -> None:
         #: Reserve a domain ID (False only with DISABLE_ROS_ISOLATION).
         self.isolate = isolate
@@ -57,11 +66,21 @@ class Policy:
         self.notes = notes
         #: How far discovery reaches; None when isolation is disabled (nothing is changed).
         self.discovery = discovery
+        #: Give the test a Gazebo partition of its own (not opted out, isolation on).
+        self.gz_partition = gz_partition
+
+    def partition_for(self, domain_id: int) -> str | None:
+        """The test's Gazebo partition on ``domain_id``, held by this process (None: none set)."""
+        return partition.for_this_runner(domain_id) if self.gz_partition else None
 
     def for_domain(self, domain_id: int) -> dict[str, str]:
         """The test's environment once ``domain_id`` is held."""
         env = self.discovery.apply(self.env) if self.discovery is not None else self.env
-        return {**env, DOMAIN_VAR: str(domain_id), HELD_VAR: str(domain_id)}
+        env = {**env, DOMAIN_VAR: str(domain_id), HELD_VAR: str(domain_id)}
+        name = self.partition_for(domain_id)
+        if name is not None:
+            env.update(partition.variables(name))
+        return env
 
 
 def apply_assignments(
@@ -107,10 +126,14 @@ def decide(
     environment cannot carry (OFF on Humble).
     """
     environ = os.environ if environ is None else environ
+    gz_partition = _partition_wanted(assignments, settings, env_origin)
     env, notes = apply_assignments(environ, assignments)
     # Reruns are this runner's to make: a runner started inside the test would make its
     # own on top of them, N x N attempts.
     env.pop(RERUNS_ENV, None)
+    # The test holds what its runner asked for: a runner inside it asking again would wait
+    # for what its own parent holds.
+    env.pop(RESOURCES_ENV, None)
     assigned = any(item.name == DISABLE_VAR and not item.append for item in assignments)
     if assigned:
         disabled, origin = disables_isolation(env.get(DISABLE_VAR)), f" (by {env_origin})"
@@ -135,8 +158,16 @@ def decide(
                 f"(unset {DOMAIN_VAR}) and the runner picks a free ID, or set "
                 f"{DISABLE_VAR}=1 to run without isolation"
             )
+        if gz_partition:
+            _refuse_preset_partition(assignments, environ, env_origin)
         confined = discovery.decide(env, settings.discovery_range)
-        return Policy(isolate=True, env=env, notes=tuple(notes), discovery=confined)
+        return Policy(
+            isolate=True,
+            env=env,
+            notes=tuple(notes),
+            discovery=confined,
+            gz_partition=gz_partition,
+        )
     domain = env.get(DOMAIN_VAR)
     where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
     warnings = [
@@ -149,3 +180,51 @@ def decide(
             f"{DISABLE_VAR} leaves the test's environment as it is"
         )
     return Policy(isolate=False, env=env, notes=(*notes, *warnings))
+
+
+def _partition_wanted(
+    assignments: Sequence[EnvAssignment], settings: Settings, env_origin: str
+) -> bool:
+    """The partition switch: an ``--env`` assignment (ament_add_test's ENV) has the last word.
+
+    A CMake project sets it per test there; the runner's own environment is read once, in
+    ``settings``. A value that is neither on nor off is refused like a preset (exit 2).
+    """
+    given = [item for item in assignments if item.name == partition.OPT_OUT_ENV]
+    if not given:
+        return settings.gz_partition
+    try:
+        return partition.enabled(given[-1].value, f"{partition.OPT_OUT_ENV} (by {env_origin})")
+    except partition.PartitionSettingError as error:
+        raise RefusedError(str(error), partition.OPT_OUT_ENV) from None
+
+
+def _refuse_preset_partition(
+    assignments: Sequence[EnvAssignment], environ: Mapping[str, str], env_origin: str
+) -> None:
+    """A Gazebo partition set by anyone but the runner, refused as a preset domain ID is.
+
+    Kept, the test's simulation would share it with every other test run on it, and
+    Gazebo's transport ignores ROS_DOMAIN_ID: the crosstalk the runner exists to prevent.
+    """
+    fix = (
+        f"the runner sets one per test; or set {partition.OPT_OUT_ENV}=off to manage "
+        f"Gazebo partitions yourself, or {DISABLE_VAR}=1 to run without isolation"
+    )
+    for variable in partition.VARIABLES:
+        given = [item for item in assignments if item.name == variable]
+        if given:
+            raise RefusedError(
+                f"refusing to run: {variable}={given[-1].value!r} is passed with {env_origin}, "
+                f"so the test's simulation would share that Gazebo transport partition with "
+                f"whatever else runs in it; remove it from {env_origin} ({fix})",
+                variable,
+            )
+    for variable in partition.VARIABLES:
+        if variable in environ:
+            raise RefusedError(
+                f"refusing to run: {variable} is already set to {environ[variable]!r}, so the "
+                f"test's simulation would share that Gazebo transport partition with whatever "
+                f"else runs in it; unset it (unset {variable}): {fix}",
+                variable,
+            )

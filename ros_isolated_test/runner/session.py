@@ -18,6 +18,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+from ros_isolated_test.domain_coordinator.holdings import CapacityConflictError
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
 from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
@@ -26,7 +27,7 @@ from ros_isolated_test.domain_coordinator.reservation import (
 )
 from ros_isolated_test.process import reaper, supervisor
 from ros_isolated_test.process.capture import OutputCapture
-from ros_isolated_test.runner import environment, exit_codes, settings
+from ros_isolated_test.runner import environment, exit_codes, partition, settings
 from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.xunit.model import Case, Outcome
@@ -212,6 +213,8 @@ def _guarded(
         outcome, domain_id = _attempt(request, policy, config, result, capture, guard)
     except (PoolExhaustedError, LockDirError) as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
+    except CapacityConflictError as error:
+        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
     except Interrupted as interruption:
         name = exit_codes.signal_name(interruption.signum)
         message = f"interrupted by {name} before the test started (it never ran)"
@@ -247,8 +250,12 @@ def _attempt(
     with isolation(policy, config, request.command, capture.note) as held:
         domain_id = None if held is None else held.domain_id
         if domain_id is not None:
-            capture.line(f"Running with ROS_DOMAIN_ID {domain_id}")
+            capture.line(header_line(policy, domain_id))
         lines, properties = summary(policy, domain_id, config)
+        if held is not None and held.resources:
+            line, more = resources_summary(held, config)
+            lines.insert(0, line)
+            properties.update(more)
         for line in lines:
             capture.note(line)
         result.properties.update(properties)
@@ -394,6 +401,31 @@ def _placeholder_merge(suites: list[Suite]) -> Callable[[Suite], Suite]:
     return merge
 
 
+def header_line(policy: environment.Policy, domain_id: int) -> str:
+    """The runner's first line: the test's domain ID, and its Gazebo partition beside it.
+
+    Starts as upstream's does (``Running with ROS_DOMAIN_ID <id>``): what greps for it finds it.
+    """
+    gz_name = policy.partition_for(domain_id)
+    if gz_name is None:
+        return f"Running with ROS_DOMAIN_ID {domain_id}"
+    return f"Running with ROS_DOMAIN_ID {domain_id} (Gazebo partition {gz_name})"
+
+
+def resources_summary(held: Held, config: settings.Settings) -> tuple[str, dict[str, str]]:
+    """The line saying what the test holds besides its ID, and the properties recording it."""
+    from ros_isolated_test.domain_coordinator.resources import describe
+
+    asked = describe(held.resources)
+    capacity = describe({name: config.capacity[name] for name in held.resources})
+    line = f"holding {asked} of {capacity} (waited {held.waited:.1f} s)"
+    return line, {
+        "resources": asked,
+        "resources_waited": f"{held.waited:.3f}",
+        "capacity": capacity,
+    }
+
+
 #: The suite property holding the settings' notes (IDs left out of the default pool, ...).
 SETTINGS_NOTES = "settings_notes"
 NOTES_SEPARATOR = " | "
@@ -415,12 +447,18 @@ def summary(
             lines.append(policy.discovery.describe())
             lines.extend(policy.discovery.warnings)
             properties.update(policy.discovery.properties())
+        # Gazebo's transport ignores the domain: its own partition, said beside it.
+        gz_name = policy.partition_for(domain_id)
+        lines.append(partition.describe(gz_name))
+        properties[partition.PROPERTY] = gz_name or f"not set ({partition.OPT_OUT_ENV}=off)"
         if config is not None and config.notes:
             lines.extend(config.notes)
             properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
     else:
         properties["ros_domain_id"] = policy.env.get(environment.DOMAIN_VAR, "unset (0)")
         properties["isolation"] = "disabled"
+        preset = [policy.env[name] for name in partition.VARIABLES if name in policy.env]
+        properties[partition.PROPERTY] = preset[0] if preset else "unset"
     lines.extend(policy.notes)
     return lines, properties
 
@@ -493,10 +531,16 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
 class Held:
     """The ID held for the work, and what of the work's processes outlived it."""
 
-    __slots__ = ("domain_id", "survivors")
+    __slots__ = ("domain_id", "resources", "survivors", "waited")
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(
+        self, domain_id: int | None, resources: dict[str, int] | None = None, waited: float = 0.0
+    ) -> None:
+        #: None only for resources held with isolation disabled.
         self.domain_id = domain_id
+        #: The machine resources held with it ({} for none), and how long the wait was.
+        self.resources = resources or {}
+        self.waited = waited
         #: The supervisor's survivors once it returned: the authoritative list, the one
         #: the result names. None until then: a run that ended otherwise scans afresh.
         self.survivors: Sequence[proc.Stat] | None = None
@@ -517,10 +561,22 @@ def isolation(
     the work left in its tree (SIGTERM, ``sweep_grace`` seconds, then SIGKILL), naming
     each; processes that were children before the block are not the work's, and stay.
     Either way, what survives keeps the ID blocked, and only then is the ID released.
-    Raises PoolExhaustedError or LockDirError when no ID can be had.
+    The resources ``config`` asks for are held with the ID, and without one when
+    isolation is disabled (a GPU is as scarce either way). Raises PoolExhaustedError or
+    LockDirError when no ID can be had, CapacityConflictError when runners disagree.
     """
     if not policy.isolate:
-        yield None
+        if not config.resources:
+            yield None
+            return
+        coordinator = DomainCoordinator(
+            config.lock_dir, config.pool, config.resources, config.capacity
+        )
+        hold = coordinator.hold_resources(command, config.wait_timeout, note)
+        try:
+            yield Held(None, config.resources, hold.waited)
+        finally:
+            hold.release()
         return
     others: frozenset[tuple[int, int]] = frozenset()
     adopted = False
@@ -529,9 +585,11 @@ def isolation(
         adopted = not reaper.is_subreaper() and reaper.become_subreaper()
         others = supervisor.existing_children()
     try:
-        coordinator = DomainCoordinator(config.lock_dir, config.pool)
+        coordinator = DomainCoordinator(
+            config.lock_dir, config.pool, config.resources, config.capacity
+        )
         with coordinator.reserve(command, config.wait_timeout, note) as reservation:
-            held = Held(reservation.domain_id)
+            held = Held(reservation.domain_id, config.resources, reservation.waited)
             try:
                 yield held
             finally:

@@ -22,7 +22,16 @@ from ros_isolated_test.domain_coordinator.pool import (
     PoolSpecError,
     choose_pool,
 )
-from ros_isolated_test.runner import discovery
+from ros_isolated_test.domain_coordinator.resources import (
+    CAPACITY_ENV,
+    RESOURCES_ENV,
+    ResourceSpecError,
+    capacity_for,
+    describe,
+    parse,
+    show_amount,
+)
+from ros_isolated_test.runner import discovery, partition
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -41,6 +50,7 @@ DISABLE_VAR = "DISABLE_ROS_ISOLATION"
 _FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
 
 __all__ = [
+    "CAPACITY_ENV",
     "DEFAULT_WAIT_TIMEOUT",
     "DISABLE_VAR",
     "DISCOVERY_RANGE_ENV",
@@ -48,6 +58,7 @@ __all__ = [
     "MAX_RERUNS",
     "POOL_ENV",
     "RERUNS_ENV",
+    "RESOURCES_ENV",
     "WAIT_TIMEOUT_ENV",
     "Settings",
     "SettingsError",
@@ -55,6 +66,7 @@ __all__ = [
     "disables_isolation",
     "read",
     "reruns_from",
+    "resources_from",
 ]
 
 
@@ -66,12 +78,15 @@ class Settings:
     """What the runner was configured to do, whoever configured it."""
 
     __slots__ = (
+        "capacity",
         "discovery_range",
+        "gz_partition",
         "isolation_disabled",
         "lock_dir",
         "notes",
         "pool",
         "reruns",
+        "resources",
         "wait_timeout",
     )
 
@@ -85,6 +100,9 @@ class Settings:
         isolation_disabled: bool = False,
         notes: tuple[str, ...] = (),
         reruns: int = 0,
+        gz_partition: bool = True,
+        resources: dict[str, int] | None = None,
+        capacity: dict[str, int] | None = None,
     ) -> None:
         #: The shared lock directory (ROS_ISOLATED_TEST_LOCK_DIR).
         self.lock_dir = lock_dir
@@ -101,12 +119,21 @@ class Settings:
         self.notes = notes
         #: How many more times a failed test runs (--rerun-failures, ROS_ISOLATED_TEST_RERUNS).
         self.reruns = reruns
+        #: Give each test a Gazebo transport partition of its own (ROS_ISOLATED_TEST_GZ_PARTITION).
+        self.gz_partition = gz_partition
+        #: What the test holds besides its ID (--resources, ROS_ISOLATED_TEST_RESOURCES):
+        #: {name: amount}, mem in bytes; empty: nothing.
+        self.resources = resources or {}
+        #: The capacity of every resource named in ROS_ISOLATED_TEST_CAPACITY or asked for
+        #: (the default where the variable is silent): what all runners must agree on.
+        self.capacity = capacity or {}
 
     def __repr__(self) -> str:
         return (
             f"Settings(lock_dir={self.lock_dir!r}, pool={len(self.pool)} IDs, "
             f"wait_timeout={self.wait_timeout!r}, discovery_range={self.discovery_range!r}, "
-            f"isolation_disabled={self.isolation_disabled!r}, reruns={self.reruns!r})"
+            f"isolation_disabled={self.isolation_disabled!r}, reruns={self.reruns!r}, "
+            f"resources={describe(self.resources)!r})"
         )
 
 
@@ -147,6 +174,26 @@ def reruns_from(text: str, origin: str = RERUNS_ENV) -> int:
     return int(value)
 
 
+def resources_from(
+    text: str, origin: str, capacity: dict[str, int], capacity_origin: str = CAPACITY_ENV
+) -> dict[str, int]:
+    """A request checked against ``capacity``: one above it is refused now, never waited for."""
+    try:
+        request = parse(text, origin)
+    except ResourceSpecError as error:
+        raise SettingsError(str(error)) from None
+    for name, amount in request.items():
+        have = capacity_for([name], capacity)[name]
+        if amount > have:
+            where = "as set in " + capacity_origin if name in capacity else "by default"
+            raise SettingsError(
+                f"{origin}: {name}={show_amount(name, amount)} is more than this machine's "
+                f"capacity of {name}, {show_amount(name, have)} ({where}); ask for less, or "
+                f"raise it with {CAPACITY_ENV}={name}=<amount> for every runner"
+            )
+    return request
+
+
 def read(
     environ: Mapping[str, str] | None = None,
     *,
@@ -154,11 +201,16 @@ def read(
     discovery_range: str | None = None,
     port_range: tuple[int, int] | None = None,
     reruns: int | None = None,
+    resources: str | None = None,
+    resources_origin: str = "--resources",
 ) -> Settings:
     """The settings from options (None: not given) and ``environ`` (default: os.environ).
 
     ``port_range``: the ephemeral port range the pool must keep clear of; None reads this
-    network namespace's. Raises :class:`SettingsError` for a value that cannot be used.
+    network namespace's. ``resources``: the request as given by an option ("" for an entry
+    point that asks for none); None reads ROS_ISOLATED_TEST_RESOURCES. ``resources_origin``
+    names where that string came from, in its error (the RUNNER's ``--env``, a pytest option).
+    Raises :class:`SettingsError` for a value that cannot be used.
     """
     environ = os.environ if environ is None else environ
     if wait_timeout is None:
@@ -180,6 +232,18 @@ def read(
         text = environ.get(RERUNS_ENV, "")
         reruns = reruns_from(text) if text.strip() else 0
     try:
+        explicit = parse(environ.get(CAPACITY_ENV, ""), CAPACITY_ENV)
+    except ResourceSpecError as error:
+        raise SettingsError(str(error)) from None
+    if resources is None:
+        request = resources_from(environ.get(RESOURCES_ENV, ""), RESOURCES_ENV, explicit)
+    else:
+        request = resources_from(resources, resources_origin, explicit)
+    try:
+        gz_partition = partition.enabled(environ.get(partition.OPT_OUT_ENV))
+    except partition.PartitionSettingError as error:
+        raise SettingsError(str(error)) from None
+    try:
         pool, notes = choose_pool(environ, port_range)
     except PoolSpecError as error:
         raise SettingsError(str(error)) from None
@@ -191,6 +255,9 @@ def read(
         isolation_disabled=disables_isolation(environ.get(DISABLE_VAR)),
         notes=notes,
         reruns=reruns,
+        gz_partition=gz_partition,
+        resources=request,
+        capacity={**explicit, **capacity_for(request, explicit)},
     )
 
 

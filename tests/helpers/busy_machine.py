@@ -157,7 +157,7 @@ class Scene:
             env,
         )
         line = self._first_line(name, process)
-        if line != f"Running with ROS_DOMAIN_ID {domain_id}":
+        if not line.startswith(f"Running with ROS_DOMAIN_ID {domain_id} "):
             self._stop(process)
             return False
         self.held.append(

@@ -288,6 +288,31 @@ def _ctest() -> str | None:
     return None
 
 
+#: Where Debian's ignition-transport-cli puts its tools (there is no ``ign`` wrapper).
+IGN_TRANSPORT_DIRS = "/usr/libexec/ignition/transport*"
+
+
+def ign_transport_topic() -> Path | None:
+    """Gazebo's topic tool (Debian's ``ign-transport-topic``, newest release), if installed."""
+    found = sorted(
+        Path("/").glob(IGN_TRANSPORT_DIRS.lstrip("/") + "/ign-transport-topic"),
+        key=lambda tool: int("0" + "".join(filter(str.isdigit, tool.parent.name))),
+    )
+    if found:
+        return found[-1]
+    on_path = shutil.which("ign-transport-topic")
+    return None if on_path is None else Path(on_path)
+
+
+def _ign_transport() -> str | None:
+    if ign_transport_topic() is not None:
+        return None
+    return (
+        "needs Gazebo's transport tools, ign-transport-topic (apt install "
+        "ignition-transport-cli; scripts/setup.sh installs it)"
+    )
+
+
 ROOT = Capability("root", _root)
 UNSHARE = Capability("unshare", _unshare)
 MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
@@ -313,3 +338,5 @@ UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
 CTEST = Capability("ctest", _ctest)
 #: ROS 2 Kilted's venv (.venv-kilted, made by scripts/setup.sh), for the Kilted tier.
 KILTED = Capability("kilted", _kilted)
+#: Gazebo's transport CLI (Debian's ignition-transport-cli), for the simulation isolation tests.
+IGN_TRANSPORT = Capability("ign-transport", _ign_transport)

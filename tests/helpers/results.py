@@ -18,7 +18,10 @@ from ros_isolated_test.xunit import validate
 
 #: What the runner says when the test left no result file of its own.
 NO_RESULT = "did not generate a result file"
-DOMAIN_LINE = re.compile(r"Running with ROS_DOMAIN_ID (\d+)")
+#: The runner's first line: the ID, and the Gazebo partition beside it when one is set.
+DOMAIN_LINE = re.compile(
+    r"Running with ROS_DOMAIN_ID (\d+)(?: \(Gazebo partition [A-Za-z0-9_.-]+\))?"
+)
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,13 @@ EPILOG = (
     "Set DISABLE_ROS_ISOLATION=1 (in the environment, or with --env / ament_add_test's ENV) "
     "to run without a reserved domain ID. Also read: ROS_ISOLATED_TEST_DOMAINS, "
     "ROS_ISOLATED_TEST_LOCK_DIR, ROS_ISOLATED_TEST_WAIT_TIMEOUT, "
-    "ROS_ISOLATED_TEST_DISCOVERY_RANGE (see ros-isolated-test run --help), and "
+    "ROS_ISOLATED_TEST_DISCOVERY_RANGE (see ros-isolated-test run --help); "
     "ROS_ISOLATED_TEST_RERUNS=N (also in --env / ENV, which wins): run a failed test again "
-    "up to N times (N from 0 to 100), keeping every attempt in the result file."
+    "up to N times (N from 0 to 100), keeping every attempt in the result file; "
+    "ROS_ISOLATED_TEST_RESOURCES=cpu=2,mem=4G,gpu=1 (also in --env / ENV, which wins): "
+    "machine resources the test holds with its ID, waiting until they are free; "
+    "ROS_ISOLATED_TEST_CAPACITY: how much of each the machine has (default: its CPUs, its "
+    "memory, 1 of any other name)."
 )
 
 #: run_test.py's options: (name, metavar or None for a flag, repeats, help). No argparse:
@@ -187,6 +191,16 @@ def _reruns_of(env: Sequence[EnvAssignment]) -> int | None:
     return settings.reruns_from(value, f"--env {settings.RERUNS_ENV}") if value.strip() else 0
 
 
+def _resources_of(env: Sequence[EnvAssignment]) -> str | None:
+    """ROS_ISOLATED_TEST_RESOURCES as the test's ``--env`` sets it last; None: not set there.
+
+    Read like ROS_ISOLATED_TEST_RERUNS (the CMake macros' RESOURCES argument arrives this
+    way) and checked by settings; an empty value asks for nothing.
+    """
+    found = [item for item in env if item.name == settings.RESOURCES_ENV and not item.append]
+    return found[-1].value if found else None
+
+
 def _guess_result_file(argv: Sequence[str]) -> Path | None:
     """The result file, to report a usage error in it: ament always passes it first."""
     if argv and not argv[0].startswith("-"):
@@ -226,8 +240,13 @@ def parse(argv: Sequence[str]) -> RunRequest:
             command=tuple(command),
             mode=Mode.AMENT,
             # RUNNER mode has no options of its own for these: the environment only, and
-            # for reruns the test's ENV too (ament_add_test(... ENV ROS_ISOLATED_TEST_RERUNS=2)).
-            settings=settings.read(reruns=_reruns_of(env)),
+            # for reruns and resources the test's ENV too, which wins
+            # (ament_add_test(... ENV ROS_ISOLATED_TEST_RESOURCES=gpu=1)).
+            settings=settings.read(
+                reruns=_reruns_of(env),
+                resources=_resources_of(env),
+                resources_origin=f"--env {settings.RESOURCES_ENV}",
+            ),
             result_file=result_file,
             package_name=single.get("--package-name"),
             output_file=Path(single["--output-file"]) if "--output-file" in single else None,

@@ -1,0 +1,348 @@
+"""Holding machine resources (CPUs, memory, devices) machine-wide, like domain IDs.
+
+A runner's hold is a ticket kept in the ``holds`` folder of the lock directory for the
+test's whole life: a flock'ed file whose record says what it holds. The kernel drops the
+flock however the runner dies, and a hold whose file is not locked counts for nothing,
+so resources come free on any death, with no daemon and no timeout.
+
+Taking is all-or-nothing, under one machine-wide lock (``resources.lock``): a runner
+reads what the live holds use and what earlier waiters ask, decides, and takes its
+domain ID and its resources together or nothing. Nobody waits holding part of what it
+needs, so no two runners can deadlock.
+
+The order (first come, first served, with claims): waiters are served in arrival order
+per resource. A waiter may take its resources only when, for each one it asks, what is
+free minus what every *earlier* waiter asks of it still covers its request: an earlier
+large request is set aside first, so a stream of small ones never starves it. A domain
+ID is taken only when no earlier waiter whose resources are free is still waiting for
+one; a waiter held up by a resource therefore holds up nobody who asks for other things
+or for an ID alone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from ros_isolated_test.domain_coordinator import holder
+from ros_isolated_test.domain_coordinator.flock import wait_lock
+from ros_isolated_test.domain_coordinator.queue import (
+    RESOURCE_MARK,
+    Queue,
+    Ticket,
+    record_amounts,
+)
+from ros_isolated_test.domain_coordinator.resources import describe, show_amount
+from ros_isolated_test.process import proc
+
+#: The folder of holds (and ``holds.uid<UID>`` for a user whose shared one was planted).
+HOLD_DIR = "holds"
+#: The lock every runner taking resources holds while it decides and takes.
+MUTEX = "resources.lock"
+
+__all__ = [
+    "HOLD_DIR",
+    "CapacityConflictError",
+    "Demand",
+    "Hold",
+    "Picture",
+    "amounts_json",
+    "holds",
+    "mutex",
+    "picture",
+]
+
+
+class CapacityConflictError(RuntimeError):
+    """Runners disagree on a capacity: the message names both and the fix."""
+
+
+class Hold:
+    """What one live runner holds, as its hold record says."""
+
+    __slots__ = ("capacity", "command", "domain_id", "host", "pid", "resources", "since", "user")
+
+    def __init__(
+        self,
+        pid: int,
+        user: str,
+        command: str,
+        since: float,
+        host: str,
+        resources: dict[str, int],
+        capacity: dict[str, int],
+        domain_id: int | None,
+    ) -> None:
+        self.pid = pid
+        self.user = user
+        self.command = command
+        self.since = since
+        self.host = host
+        self.resources = resources
+        #: The capacity its runner was given for what it holds: all runners must agree.
+        self.capacity = capacity
+        self.domain_id = domain_id
+
+    def as_dict(self) -> dict[str, object]:
+        """The fields ``status --json`` shows."""
+        return {
+            "pid": self.pid,
+            "user": self.user,
+            "command": self.command,
+            "started": self.since,
+            "host": self.host,
+            "resources": dict(self.resources),
+            "domain_id": self.domain_id,
+        }
+
+    def describe(self) -> str:
+        """``pid 12 (alice) cpu=2,gpu=1 <command>``, for waiting messages."""
+        return f"pid {self.pid} ({self.user}) {describe(self.resources)} {self.command[:60]}"
+
+
+class Demand:
+    """A waiter's request: resources, and whether it needs a domain ID too."""
+
+    __slots__ = ("capacity", "domain", "name", "pid", "resources")
+
+    def __init__(
+        self,
+        name: str,
+        resources: dict[str, int],
+        domain: bool,
+        capacity: dict[str, int] | None = None,
+        pid: int = 0,
+    ) -> None:
+        #: The ticket's name: names sort by arrival time.
+        self.name = name
+        self.resources = resources
+        self.domain = domain
+        self.capacity = capacity or {}
+        self.pid = pid
+
+
+def amounts_json(amounts: dict[str, int]) -> str:
+    """{name: amount} as a JSON object (names are checked words: no escaping needed)."""
+    return "{" + ", ".join(f'"{name}": {amount}' for name, amount in amounts.items()) + "}"
+
+
+def _records(queue: Queue) -> Iterator[tuple[Path, dict[str, object]]]:
+    """Each live ticket of ``queue`` with its record ({} when unreadable)."""
+    for path in queue.live_tickets():
+        data: dict[str, object] | None
+        try:
+            data = holder.parse_record(holder.read_small_file(path))
+        except (OSError, ValueError):
+            data = None
+        yield path, data or {}
+
+
+def holds(lock_dir: Path) -> list[Hold]:
+    """Every live hold, oldest first. A hold nobody can read holds nothing."""
+    found: list[Hold] = []
+    limit = proc.pid_max()
+    for path, data in _records(Queue(lock_dir, HOLD_DIR)):
+        try:
+            owner = holder.user_name(os.lstat(path).st_uid)
+        except OSError:
+            continue  # released meanwhile
+        domain_id = data.get("domain_id")
+        found.append(
+            Hold(
+                pid=holder.record_pid(data.get("pid"), limit) or 0,
+                user=owner,
+                command=holder.record_text(data.get("command"), holder.LONG_TEXT) or "(no record)",
+                since=holder.record_time(data.get("started")) or 0.0,
+                host=holder.record_text(data.get("host")) or "",
+                resources=record_amounts(data.get("resources")),
+                capacity=record_amounts(data.get("capacity")),
+                domain_id=domain_id if type(domain_id) is int and 0 <= domain_id < 1000 else None,
+            )
+        )
+    return found
+
+
+def demands(queue: Queue) -> list[Demand]:
+    """Every live waiter's request, first come first. An ID-only ticket's record is not read."""
+    found: list[Demand] = []
+    limit = proc.pid_max()
+    for path in queue.live_tickets():
+        name = path.name
+        if not name.endswith(RESOURCE_MARK + ".ticket"):
+            found.append(Demand(name, {}, domain=True))
+            continue
+        data: dict[str, object] | None
+        try:
+            data = holder.parse_record(holder.read_small_file(path))
+        except (OSError, ValueError):
+            data = None
+        data = data or {}
+        found.append(
+            Demand(
+                name,
+                record_amounts(data.get("resources")),
+                domain=data.get("domain") is not False,
+                capacity=record_amounts(data.get("capacity")),
+                pid=holder.record_pid(data.get("pid"), limit) or 0,
+            )
+        )
+    return found
+
+
+class Picture:
+    """What is held and who waits, read once: the facts a decision is made from."""
+
+    def __init__(self, held: list[Hold], waiting: list[Demand], capacity: dict[str, int]) -> None:
+        self.held = held
+        self.waiting = waiting
+        #: Ours, and for names we were not told of, what their holders and waiters say.
+        self.capacity = capacity
+        used: dict[str, int] = {}
+        for hold in held:
+            for name, amount in hold.resources.items():
+                used[name] = used.get(name, 0) + amount
+        self.used = used
+
+    def free(self, name: str) -> int:
+        return self.capacity.get(name, 1) - self.used.get(name, 0)
+
+    def may_go(self, mine: Demand, before: str | None) -> tuple[bool, bool]:
+        """(whether our resources fit, whether an ID is ours to try for) now.
+
+        ``before``: our ticket's name (waiters sorting before it are earlier); None for a
+        newcomer without a ticket, behind everyone.
+        """
+        claimed: dict[str, int] = {}
+        id_ahead = False
+        for demand in self.waiting:
+            if before is not None and demand.name >= before:
+                break
+            if demand.domain and self._fits(demand.resources, claimed):
+                id_ahead = True
+            for name, amount in demand.resources.items():
+                claimed[name] = claimed.get(name, 0) + amount
+        fits = self._fits(mine.resources, claimed)
+        return fits, fits and not (mine.domain and id_ahead)
+
+    def _fits(self, wanted: dict[str, int], claimed: dict[str, int]) -> bool:
+        return all(
+            self.free(name) - claimed.get(name, 0) >= amount for name, amount in wanted.items()
+        )
+
+    def shortage(self, wanted: dict[str, int]) -> str:
+        """What of ``wanted`` is taken, and by whom, for the waiting message."""
+        short = [
+            f"{name} {show_amount(name, max(self.free(name), 0))} of "
+            f"{show_amount(name, self.capacity.get(name, 1))} free"
+            for name in sorted(wanted)
+            if self.free(name) < wanted[name]
+        ]
+        users = [hold.describe() for hold in self.held if set(hold.resources) & set(wanted)]
+        if not short:
+            return "earlier waiters come first"
+        shown = "; ".join(users[:6]) + (f" and {len(users) - 6} more" if len(users) > 6 else "")
+        return f"{', '.join(short)} (held by {shown or 'nobody known'})"
+
+
+def picture(
+    lock_dir: Path, queue: Queue, wanted: dict[str, int], capacity: dict[str, int]
+) -> Picture:
+    """Read the holds and the queue; raise :class:`CapacityConflictError` on a disagreement.
+
+    Only the capacity of what we ask for must agree: a runner told ``gpu=2`` while we
+    were told ``gpu=1`` would hand out a GPU we think is taken.
+    """
+    held = holds(lock_dir)
+    waiting = demands(queue)
+    known: dict[str, int] = {}
+    others: list[tuple[str, int, int]] = [
+        (name, amount, hold.pid) for hold in held for name, amount in hold.capacity.items()
+    ]
+    others += [
+        (name, amount, demand.pid) for demand in waiting for name, amount in demand.capacity.items()
+    ]
+    for name, amount, pid in others:
+        if name in wanted and amount != capacity.get(name):
+            raise CapacityConflictError(
+                f"runners disagree on the capacity of {name}: this one has "
+                f"{show_amount(name, capacity.get(name, 1))}, runner pid {pid} has "
+                f"{show_amount(name, amount)}; give every runner the same "
+                f"ROS_ISOLATED_TEST_CAPACITY (e.g. export it where ctest or colcon starts)"
+            )
+        known.setdefault(name, amount)
+    return Picture(held, waiting, {**known, **capacity})
+
+
+def _open_mutex(path: Path) -> int | None:
+    """A descriptor of a mutex file (created shared if missing); None if something is planted."""
+    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
+    try:
+        fd = os.open(path, flags | os.O_CREAT, 0o666)
+    except OSError:
+        return None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            os.close(fd)
+            return None
+        if info.st_uid == os.getuid():
+            with contextlib.suppress(OSError):
+                os.fchmod(fd, 0o666)  # every user must open it
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+@contextlib.contextmanager
+def mutex(lock_dir: Path) -> Iterator[str | None]:
+    """Hold the machine-wide lock for deciding and taking resources (a few milliseconds).
+
+    Yields None, or one line when the shared lock file was planted and this user's own
+    one stands in: runners of this user still exclude each other, and the claims still
+    bind everyone.
+    """
+    problem = None
+    fd = _open_mutex(lock_dir / MUTEX)
+    if fd is None:
+        problem = (
+            f"the resource lock {lock_dir / MUTEX} is unusable (planted?): runners of this "
+            f"user take resources under their own lock; remove it to restore the shared one"
+        )
+        fd = _open_mutex(lock_dir / f"resources.uid{os.getuid()}.lock")
+    if fd is None:
+        yield problem
+        return
+    try:
+        wait_lock(fd)
+        yield problem
+    finally:
+        os.close(fd)
+
+
+def hold(
+    lock_dir: Path,
+    command: Sequence[str],
+    wanted: dict[str, int],
+    capacity: dict[str, int],
+    domain_id: int | None,
+) -> Ticket | None:
+    """Record our hold (under :func:`mutex`): the ticket to close on release; None if impossible."""
+    extra = (
+        f'"resources": {amounts_json(wanted)}, '
+        f'"capacity": {amounts_json({name: capacity[name] for name in wanted})}, '
+        f'"domain_id": {"null" if domain_id is None else domain_id}'
+    )
+    return Queue(lock_dir, HOLD_DIR).enter(command, extra, marked=True)
+
+
+def ticket_fields(wanted: dict[str, int], capacity: dict[str, int], domain: bool) -> str:
+    """The extra record fields of a waiter's ticket that asks for resources."""
+    return (
+        f'"resources": {amounts_json(wanted)}, '
+        f'"capacity": {amounts_json({name: capacity[name] for name in wanted})}, '
+        f'"domain": {"true" if domain else "false"}'
+    )

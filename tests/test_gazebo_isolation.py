@@ -1,0 +1,153 @@
+"""Simulation tests run at once stay apart on Gazebo's real transport, as on DDS.
+
+Three probes (helpers/gz_probe.py) start together, each listening on one Gazebo topic
+and publishing its own token with the real ``ign-transport-topic``, all of them
+publishing only once every listener is live. Through ``run`` and through the RUNNER,
+each hears its own token only. The controls are the same three with isolation disabled
+(``DISABLE_ROS_ISOLATION=1``, through ``run``) and with the partition switched off
+(``ROS_ISOLATED_TEST_GZ_PARTITION=off`` in the RUNNER's ``--env``, IDs still held):
+they hear each other, and the test fails if they stop hearing each other, since the
+isolated case would then prove nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from helpers import capabilities
+from helpers.commands import CLI, HUNG, ament_args
+from helpers.results import load_result
+
+from ros_isolated_test.runner import partition
+
+pytestmark = [capabilities.IGN_TRANSPORT.mark]
+
+PROBE = Path(__file__).parent / "helpers" / "gz_probe.py"
+PROBES = 3
+
+
+class Probes:
+    """Three probes started at once through ``run`` or the RUNNER, and what each heard."""
+
+    def __init__(self, tmp_path: Path, mode: str, env: dict[str, str], runner_script: str) -> None:
+        self.folder = tmp_path / mode
+        self.rendezvous = self.folder / "rendezvous"
+        self.rendezvous.mkdir(parents=True)
+        self.mode = mode
+        self.env = env
+        self.runner_script = runner_script
+        # Unique to this run: another run of these tests elsewhere is never mistaken for one.
+        self.tokens = [f"t{index}_{os.getpid()}_{os.urandom(3).hex()}" for index in range(PROBES)]
+        self.processes: list[subprocess.Popen[bytes]] = []
+
+    def result(self, token: str) -> Path:
+        return self.folder / "out" / "pkg" / f"{token}.xml"
+
+    def log(self, token: str) -> Path:
+        return self.folder / f"{token}.log"
+
+    def start(self, options: tuple[str, ...] = ()) -> None:
+        tool = capabilities.ign_transport_topic()
+        assert tool is not None  # the module's mark
+        for token in self.tokens:
+            command = [sys.executable, str(PROBE), str(tool), str(self.rendezvous), token]
+            command.append(str(PROBES))
+            if self.mode == "shell":
+                assert not options
+                argv = [CLI, "run", "--junit-xml", str(self.result(token)), "--", *command]
+            else:
+                args = ament_args(
+                    self.result(token), command, "--generate-result-on-success", *options
+                )
+                argv = [sys.executable, "-u", self.runner_script, *args]
+            with self.log(token).open("wb") as out:
+                self.processes.append(
+                    subprocess.Popen(
+                        argv, env=self.env, stdin=subprocess.DEVNULL, stdout=out, stderr=out
+                    )
+                )
+
+    def finish(self) -> None:
+        """All three ended, each passed (heard itself, met the others)."""
+        codes = [process.wait(HUNG * 3) for process in self.processes]
+        logs = {token: self.log(token).read_text(errors="replace") for token in self.tokens}
+        assert codes == [0] * PROBES, logs
+
+    def heard(self, token: str) -> set[str]:
+        return set((self.rendezvous / f"heard-{token}").read_text().split())
+
+    def partition_of(self, token: str) -> dict[str, str]:
+        lines = (self.rendezvous / f"partition-{token}").read_text().split()
+        return dict(line.split("=", 1) for line in lines)
+
+    def stop(self) -> None:
+        for process in self.processes:
+            if process.poll() is None:
+                process.terminate()
+        for process in self.processes:
+            try:
+                process.wait(HUNG)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+
+MakeProbes = Callable[[str, dict[str, str]], Probes]
+
+
+@pytest.fixture
+def probes(tmp_path: Path, env: dict[str, str], runner_script: str) -> Iterator[MakeProbes]:
+    """Makes a group of probes (mode, extra environment); whatever still runs is ended."""
+    made: list[Probes] = []
+
+    def make(mode: str, extra_env: dict[str, str]) -> Probes:
+        made.append(Probes(tmp_path, mode, {**env, **extra_env}, runner_script))
+        return made[-1]
+
+    yield make
+    for item in made:
+        item.stop()
+
+
+@pytest.mark.parametrize("mode", ["shell", "runner"])
+def test_three_simulations_at_once_each_hear_only_their_own_token(
+    probes: MakeProbes, mode: str
+) -> None:
+    group = probes(mode, {})
+    group.start()
+    group.finish()
+    names = set()
+    for token in group.tokens:
+        assert group.heard(token) == {token}, (token, group.heard(token))
+        seen = group.partition_of(token)
+        assert seen["GZ_PARTITION"] == seen["IGN_PARTITION"], seen
+        name = seen["GZ_PARTITION"]
+        assert name.startswith("rit_"), seen
+        names.add(name)
+        assert load_result(group.result(token)).properties["gz_partition"] == name
+        assert f"Gazebo transport partition {name} " in group.log(token).read_text()
+    assert len(names) == PROBES, names
+
+
+@pytest.mark.parametrize(
+    ("mode", "extra_env", "options"),
+    [
+        ("shell", {"DISABLE_ROS_ISOLATION": "1"}, ()),
+        ("runner", {}, ("--env", f"{partition.OPT_OUT_ENV}=off")),
+    ],
+    ids=["run-isolation-disabled", "runner-partition-off"],
+)
+def test_control_without_partitions_the_same_three_hear_each_other(
+    probes: MakeProbes, mode: str, extra_env: dict[str, str], options: tuple[str, ...]
+) -> None:
+    group = probes(mode, extra_env)
+    group.start(options)
+    group.finish()
+    for token in group.tokens:
+        assert group.partition_of(token) == {"GZ_PARTITION": "-", "IGN_PARTITION": "-"}
+        # Every other probe's token: the crosstalk a partition per test prevents.
+        assert set(group.tokens) <= group.heard(token), (token, group.heard(token))

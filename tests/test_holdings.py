@@ -1,0 +1,237 @@
+"""Holding machine resources: the order of waiters, real holds on real flocks, and conflicts.
+
+The order is checked on the decision itself (``Picture.may_go``: which waiter may take
+what, given what is held and who came earlier); holding, death and release on real
+files and processes; the end-to-end behaviour of runners is in test_resource_scheduling.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from helpers.domains import free_ids
+from helpers.processes import poll_until
+
+from ros_isolated_test.domain_coordinator import holdings
+from ros_isolated_test.domain_coordinator.holdings import (
+    CapacityConflictError,
+    Demand,
+    Hold,
+    Picture,
+)
+from ros_isolated_test.domain_coordinator.queue import Queue
+from ros_isolated_test.domain_coordinator.reservation import (
+    DomainCoordinator,
+    PoolExhaustedError,
+    ResourcesBusyError,
+)
+
+CAPACITY = {"cpu": 4, "gpu": 1}
+
+
+def _holding(resources: dict[str, int]) -> Hold:
+    return Hold(1, "someone", "a test", 0.0, "", resources, {}, 1)
+
+
+def _board(held: list[dict[str, int]], waiting: list[Demand]) -> Picture:
+    return Picture([_holding(item) for item in held], waiting, dict(CAPACITY))
+
+
+def test_an_earlier_large_request_is_set_aside_before_later_small_ones() -> None:
+    """No starvation: cpu=4 waiting first keeps later cpu=1 requests out of the 2 free CPUs."""
+    big = Demand("1-big", {"cpu": 4}, domain=True)
+    small = Demand("2-small", {"cpu": 1}, domain=True)
+    board = _board([{"cpu": 2}], [big, small])
+    assert board.may_go(small, small.name) == (False, False)
+    # Control: without the large request ahead, the small one fits at once.
+    assert _board([{"cpu": 2}], [small]).may_go(small, small.name) == (True, True)
+    # And the large one itself waits for all four, however long the small ones take.
+    assert board.may_go(big, big.name) == (False, False)
+    assert _board([], [big, small]).may_go(big, big.name) == (True, True)
+
+
+def test_a_waiter_held_up_by_a_device_holds_up_nobody_who_asks_for_other_things() -> None:
+    gpu = Demand("1-gpu", {"gpu": 1}, domain=True)
+    cpu = Demand("2-cpu", {"cpu": 1}, domain=True)
+    id_only = Demand("3-id", {}, domain=True)
+    board = _board([{"gpu": 1}], [gpu, cpu, id_only])
+    assert board.may_go(cpu, cpu.name) == (True, True)
+    # cpu=1 is free and comes earlier: it is to get an ID before the ID-only runner.
+    assert board.may_go(id_only, id_only.name) == (True, False)
+    # Control: with the GPU free, the GPU waiter comes first for an ID, as it arrived first.
+    free_gpu = _board([], [gpu, id_only])
+    assert free_gpu.may_go(id_only, id_only.name) == (True, False)
+    assert _board([{"gpu": 1}], [gpu, id_only]).may_go(id_only, id_only.name) == (True, True)
+
+
+def test_a_newcomer_without_a_ticket_comes_after_every_waiter() -> None:
+    waiting = Demand("1-gpu", {"gpu": 1}, domain=True)
+    newcomer = Demand("", {"gpu": 1}, domain=True)
+    assert _board([], [waiting]).may_go(newcomer, None) == (False, False)
+    # "" (no order asked): whatever is free now.
+    assert _board([], [waiting]).may_go(newcomer, "") == (True, True)
+
+
+def test_resources_without_an_id_wait_for_no_earlier_runner_waiting_for_an_id() -> None:
+    id_only = Demand("1-id", {}, domain=True)
+    disabled = Demand("2-gpu", {"gpu": 1}, domain=False)
+    assert _board([], [id_only, disabled]).may_go(disabled, disabled.name) == (True, True)
+    with_id = Demand("2-gpu", {"gpu": 1}, domain=True)
+    assert _board([], [id_only, with_id]).may_go(with_id, with_id.name) == (True, False)
+
+
+def _holder_process(lock_dir: Path, resources: str) -> subprocess.Popen[str]:
+    """A process holding ``resources`` (a real hold) until killed; it prints when it holds."""
+    script = (
+        "import sys, time\n"
+        "from pathlib import Path\n"
+        "from ros_isolated_test.domain_coordinator import holdings, resources\n"
+        "wanted = resources.parse(sys.argv[2], 'test')\n"
+        "held = holdings.hold(Path(sys.argv[1]), ['holder'], wanted, wanted, None)\n"
+        "assert held is not None\n"
+        "print('held', flush=True)\n"
+        "time.sleep(600)\n"
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-c", script, str(lock_dir), resources],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout is not None
+    assert process.stdout.readline().strip() == "held"
+    return process
+
+
+def test_a_hold_counts_while_its_runner_lives_and_nothing_after_sigkill(lock_dir: Path) -> None:
+    process = _holder_process(lock_dir, "gpu=1")
+    try:
+        held = holdings.holds(lock_dir)
+        assert [(hold.pid, hold.resources, hold.capacity) for hold in held] == [
+            (process.pid, {"gpu": 1}, {"gpu": 1})
+        ]
+    finally:
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+    # The kernel dropped the flock: the record left behind holds nothing, and goes.
+    assert holdings.holds(lock_dir) == []
+    assert not list((lock_dir / holdings.HOLD_DIR).iterdir())
+
+
+def test_a_planted_or_unlocked_record_holds_nothing(lock_dir: Path) -> None:
+    folder = lock_dir / holdings.HOLD_DIR
+    folder.mkdir(mode=0o1777)
+    (folder / "00000000000000000001-1.r.ticket").write_text(
+        '{"pid": 1, "resources": {"gpu": 1}, "capacity": {"gpu": 1}}'
+    )
+    assert holdings.holds(lock_dir) == []
+    # Control: a real hold of the same is counted.
+    process = _holder_process(lock_dir, "gpu=1")
+    try:
+        assert [hold.resources for hold in holdings.holds(lock_dir)] == [{"gpu": 1}]
+    finally:
+        process.kill()
+        process.wait()
+
+
+def test_runners_that_disagree_on_a_capacity_are_told(lock_dir: Path) -> None:
+    process = _holder_process(lock_dir, "gpu=1")  # its capacity: gpu=1
+    try:
+        queue = Queue(lock_dir)
+        with pytest.raises(CapacityConflictError, match=r"capacity of gpu.*ROS_ISOLATED_TEST_CAP"):
+            holdings.picture(lock_dir, queue, {"gpu": 1}, {"gpu": 2})
+        # Control: the same capacity, or a resource the holder was not given, is fine.
+        assert holdings.picture(lock_dir, queue, {"gpu": 1}, {"gpu": 1}).free("gpu") == 0
+        assert holdings.picture(lock_dir, queue, {"sim": 1}, {"sim": 2}).free("sim") == 2
+    finally:
+        process.kill()
+        process.wait()
+
+
+def test_an_id_and_resources_are_taken_together_or_not_at_all(lock_dir: Path) -> None:
+    ids = free_ids(1)
+    first = DomainCoordinator(lock_dir, ids, {"gpu": 1}, {"gpu": 1})
+    held = first.acquire(["first"])
+    try:
+        assert held.holding is not None
+        # The pool is empty now: a runner asking only for cpu (free) takes nothing.
+        other = DomainCoordinator(lock_dir, ids, {"cpu": 1}, {"cpu": 2})
+        with pytest.raises(PoolExhaustedError):
+            other.acquire(["other"])
+        assert [hold.resources for hold in holdings.holds(lock_dir)] == [{"gpu": 1}]
+    finally:
+        held.release()
+    # Released together: no hold and the ID free.
+    assert holdings.holds(lock_dir) == []
+    again = DomainCoordinator(lock_dir, ids).acquire(["again"])
+    again.release()
+
+
+def test_a_busy_resource_fails_at_once_without_waiting_and_names_its_holder(
+    lock_dir: Path,
+) -> None:
+    ids = free_ids(2)
+    process = _holder_process(lock_dir, "gpu=1")
+    try:
+        coordinator = DomainCoordinator(lock_dir, ids, {"gpu": 1}, {"gpu": 1})
+        with pytest.raises(ResourcesBusyError, match=rf"gpu=1 is not free.*pid {process.pid}"):
+            coordinator.acquire(["waits"], wait_timeout=0)
+        # Nothing of ours is left: no ID held, no hold.
+        assert [hold.pid for hold in holdings.holds(lock_dir)] == [process.pid]
+    finally:
+        process.kill()
+        process.wait()
+    # Control: once the holder is gone, the same request gets both at once.
+    reservation = DomainCoordinator(lock_dir, ids, {"gpu": 1}, {"gpu": 1}).acquire(["now"])
+    assert reservation.domain_id in ids
+    reservation.release()
+
+
+def test_resources_without_an_id_hold_no_id(lock_dir: Path) -> None:
+    coordinator = DomainCoordinator(lock_dir, free_ids(1), {"gpu": 1}, {"gpu": 1})
+    hold = coordinator.hold_resources(["disabled"])
+    try:
+        [record] = holdings.holds(lock_dir)
+        assert (record.domain_id, record.resources) == (None, {"gpu": 1})
+        # The pool's one ID is still free for a runner that asks nothing.
+        DomainCoordinator(lock_dir, coordinator.pool).acquire(["id"]).release()
+    finally:
+        hold.release()
+    assert holdings.holds(lock_dir) == []
+
+
+def test_a_waiting_runner_gets_the_resource_when_its_holder_dies(lock_dir: Path) -> None:
+    process = _holder_process(lock_dir, "gpu=1")
+    ids = free_ids(1)
+    script = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "from ros_isolated_test.domain_coordinator.reservation import DomainCoordinator\n"
+        "ids = [int(sys.argv[2])]\n"
+        "c = DomainCoordinator(Path(sys.argv[1]), ids, {'gpu': 1}, {'gpu': 1})\n"
+        "r = c.acquire(['waiter'], wait_timeout=120, on_wait=lambda m: print(m, flush=True))\n"
+        "print('got', r.domain_id, flush=True)\n"
+    )
+    waiter = subprocess.Popen(
+        [sys.executable, "-c", script, str(lock_dir), str(ids[0])],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert waiter.stdout is not None
+        assert waiter.stdout.readline().startswith("waiting for gpu=1")
+        poll_until(lambda: bool(Queue(lock_dir).waiters()), "the waiter queued")
+        assert Queue(lock_dir).waiters()[0].resources == {"gpu": 1}
+        os.kill(process.pid, signal.SIGKILL)
+        process.wait()
+        out, _ = waiter.communicate(timeout=120)
+        assert f"got {ids[0]}" in out
+    finally:
+        for child in (process, waiter):
+            if child.poll() is None:
+                child.kill()
+            child.wait()

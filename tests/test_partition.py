@@ -1,0 +1,297 @@
+"""A Gazebo transport partition per test, beside its domain ID; a preset one is refused.
+
+Gazebo's transport ignores ROS_DOMAIN_ID, so the runner gives each test GZ_PARTITION and
+IGN_PARTITION of its own, and refuses one someone else set, as it refuses a preset
+ROS_DOMAIN_ID (test_refusal.py). The name, the policy, and real runs through ``run`` and
+the RUNNER; the real transport's view is in test_gazebo_isolation.py.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from collections.abc import Sequence
+from pathlib import Path
+
+import pytest
+from helpers.commands import ament_args, run_cli, run_runner
+from helpers.results import domain_of, load_result
+
+from ros_isolated_test.runner import environment, partition, settings
+from ros_isolated_test.runner.request import EnvAssignment
+
+ERROR_PREFIX = "ros-isolated-test: error: "
+MODES = ["shell", "runner"]
+#: What the test prints: the partition variables it got, and its runner's PID.
+SHOW = 'echo "gz=${GZ_PARTITION-unset} ign=${IGN_PARTITION-unset} runner=$PPID"'
+SAFE = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
+
+
+# --- the name ---------------------------------------------------------------------------
+
+
+def test_the_name_carries_host_id_and_runner_pid_in_safe_characters() -> None:
+    assert partition.name("ci-7", 17, 4242) == "rit_ci-7_d17_4242"
+    for host in ("build box/1@lab", "hôte", "a\r\nb", "", "x" * 300, "ci.example.org"):
+        name = partition.name(host, 232, 4194303)
+        assert set(name) <= SAFE, name
+        assert name.startswith("rit_") and name.endswith("_d232_4194303"), name
+        assert len(name) <= 60, name
+    assert partition.name("ci.example.org", 3, 9) == "rit_ci.example.org_d3_9"
+
+
+def test_names_differ_in_each_of_host_id_and_pid() -> None:
+    base = ("ci-runner-0001.build.example.org.long.suffix.here", 5, 100)
+    other_hosts = [
+        "ci-runner-0002.build.example.org.long.suffix.here",
+        "ci-runner-0001.build.example.org.long.suffix.hers",
+    ]
+    names = {
+        partition.name(*base),
+        *(partition.name(host, 5, 100) for host in other_hosts),
+        partition.name(base[0], 6, 100),
+        partition.name(base[0], 5, 101),
+    }
+    assert len(names) == 5, names
+
+
+def test_this_runners_name_is_the_one_its_record_gives() -> None:
+    """``status`` rebuilds it from the holder record: host (uname), ID, PID."""
+    expected = partition.name(os.uname().nodename, 9, os.getpid())
+    assert partition.for_this_runner(9) == expected
+
+
+@pytest.mark.parametrize(
+    ("value", "wanted"),
+    [
+        (None, True),
+        ("", True),
+        ("on", True),
+        (" ON ", True),
+        ("1", True),
+        ("off", False),
+        ("0", False),
+        ("false", False),
+        ("No", False),
+    ],
+)
+def test_the_switch_reads_on_and_off_words(value: str | None, wanted: bool) -> None:
+    assert partition.enabled(value) is wanted
+
+
+@pytest.mark.parametrize("value", ["of", "disable", "2"])
+def test_the_switch_refuses_anything_else_naming_itself(value: str) -> None:
+    with pytest.raises(partition.PartitionSettingError, match="ROS_ISOLATED_TEST_GZ_PARTITION"):
+        partition.enabled(value)
+    with pytest.raises(settings.SettingsError, match=f"{value!r} is neither on nor off"):
+        settings.read({partition.OPT_OUT_ENV: value})
+
+
+# --- the policy -------------------------------------------------------------------------
+
+
+def _decide(
+    environ: dict[str, str], assignments: Sequence[EnvAssignment] = ()
+) -> environment.Policy:
+    return environment.decide(assignments, settings.read(environ), environ)
+
+
+def test_the_policy_sets_both_variables_to_this_runners_partition() -> None:
+    policy = _decide({})
+    env = policy.for_domain(11)
+    assert env["GZ_PARTITION"] == env["IGN_PARTITION"] == partition.for_this_runner(11)
+    assert policy.partition_for(11) == partition.for_this_runner(11)
+
+
+@pytest.mark.parametrize("variable", partition.VARIABLES)
+@pytest.mark.parametrize("value", ["sim", ""])
+def test_a_preset_partition_is_refused_naming_it_and_the_fix(variable: str, value: str) -> None:
+    with pytest.raises(environment.RefusedError) as refused:
+        _decide({variable: value})
+    message = str(refused.value)
+    assert refused.value.variable == variable
+    assert f"{variable} is already set to {value!r}" in message
+    assert f"unset {variable}" in message
+    assert "ROS_ISOLATED_TEST_GZ_PARTITION=off" in message
+    assert "DISABLE_ROS_ISOLATION=1" in message
+    assert "\n" not in message
+
+
+@pytest.mark.parametrize("variable", partition.VARIABLES)
+@pytest.mark.parametrize("append", [False, True], ids=["env", "append-env"])
+def test_a_partition_passed_with_env_is_refused(variable: str, append: bool) -> None:
+    given = [EnvAssignment(variable, "sim", append=append)]
+    with pytest.raises(environment.RefusedError) as refused:
+        _decide({}, given)
+    assert f"{variable}='sim' is passed with --env" in str(refused.value)
+    assert "remove it from --env" in str(refused.value)
+
+
+def test_disable_ros_isolation_keeps_the_users_partitions() -> None:
+    environ = {"GZ_PARTITION": "mine", "IGN_PARTITION": "old", "DISABLE_ROS_ISOLATION": "1"}
+    policy = _decide(environ)
+    assert not policy.isolate
+    assert (policy.env["GZ_PARTITION"], policy.env["IGN_PARTITION"]) == ("mine", "old")
+    given = [EnvAssignment("DISABLE_ROS_ISOLATION", "1"), EnvAssignment("GZ_PARTITION", "x")]
+    assert _decide({}, given).env["GZ_PARTITION"] == "x"
+
+
+def test_the_switch_off_sets_nothing_and_refuses_nothing() -> None:
+    off = {partition.OPT_OUT_ENV: "off"}
+    policy = _decide(off)
+    assert policy.isolate and policy.partition_for(3) is None
+    env = policy.for_domain(3)
+    assert "GZ_PARTITION" not in env and "IGN_PARTITION" not in env
+    kept = _decide({**off, "GZ_PARTITION": "mine"}).for_domain(3)
+    assert kept["GZ_PARTITION"] == "mine" and "IGN_PARTITION" not in kept
+    # From --env (ament_add_test's ENV), which has the last word over the environment.
+    by_env = _decide({}, [EnvAssignment(partition.OPT_OUT_ENV, "off")])
+    assert by_env.partition_for(3) is None
+    back_on = _decide(off, [EnvAssignment(partition.OPT_OUT_ENV, "on")])
+    assert back_on.partition_for(3) == partition.for_this_runner(3)
+    with pytest.raises(environment.RefusedError, match=r"\(by --env\)=.*neither on nor off"):
+        _decide({}, [EnvAssignment(partition.OPT_OUT_ENV, "maybe")])
+
+
+# --- real runs: run and the RUNNER -------------------------------------------------------
+
+
+def invoke(
+    mode: str,
+    runner_script: str,
+    env: dict[str, str],
+    cwd: Path,
+    command: Sequence[str],
+    options: Sequence[str] = (),
+) -> tuple[subprocess.CompletedProcess[str], Path]:
+    """``command`` through ``run --junit-xml`` or the RUNNER (with ``options``); and its file."""
+    result = cwd / "out" / "pkg" / "t.xml"
+    if mode == "shell":
+        assert not options
+        return run_cli(["run", "--junit-xml", str(result), "--", *command], env, cwd=cwd), result
+    args = ament_args(result, command, "--generate-result-on-success", *options)
+    return run_runner(runner_script, args, env, cwd=cwd), result
+
+
+def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, f"expected exactly one line on stderr, got:\n{proc.stderr}"
+    assert lines[0].startswith(ERROR_PREFIX), lines[0]
+    return lines[0].removeprefix(ERROR_PREFIX)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_each_test_gets_its_partition_said_and_recorded(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    proc, result = invoke(mode, runner_script, env, tmp_path, ["sh", "-c", SHOW])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    domain_id = domain_of(proc.stdout)
+    shown = next(line for line in proc.stdout.splitlines() if line.startswith("gz="))
+    runner_pid = int(shown.rsplit("runner=", 1)[1])
+    name = partition.name(os.uname().nodename, domain_id, runner_pid)
+    assert f"gz={name} ign={name} runner={runner_pid}\n" in proc.stdout
+    said = f"-- ros-isolated-test: Gazebo transport partition {name} (GZ_PARTITION, IGN_PARTITION)"
+    assert said in proc.stdout.splitlines()
+    summary = load_result(result)
+    assert summary.properties["gz_partition"] == name
+    assert summary.properties["ros_domain_id"] == str(domain_id)
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("variable", partition.VARIABLES)
+def test_a_preset_partition_is_refused_and_nothing_runs(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str, variable: str
+) -> None:
+    env[variable] = "shared_sim"
+    proc, result = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists(), "a refused test must not run"
+    assert "Running with ROS_DOMAIN_ID" not in proc.stdout
+    line = the_error_line(proc)
+    assert f"{variable} is already set to 'shared_sim'" in line
+    assert f"unset {variable}" in line and "DISABLE_ROS_ISOLATION=1" in line
+    case = load_result(result).only
+    assert case.outcome == "failure"
+    assert case.message == line
+    # The control: the same run without the preset variable runs.
+    del env[variable]
+    again, _ = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert (tmp_path / "ran").exists()
+
+
+@pytest.mark.parametrize("variable", partition.VARIABLES)
+def test_a_partition_passed_with_env_to_the_runner_is_refused(
+    runner_script: str, env: dict[str, str], tmp_path: Path, variable: str
+) -> None:
+    options = ["--env", f"{variable}=shared_sim"]
+    proc, result = invoke("runner", runner_script, env, tmp_path, ["touch", "ran"], options)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists()
+    line = the_error_line(proc)
+    assert f"{variable}='shared_sim' is passed with --env" in line
+    assert load_result(result).only.message == line
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_disable_ros_isolation_runs_on_the_users_partitions(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env.update(GZ_PARTITION="mine", IGN_PARTITION="mine_too", DISABLE_ROS_ISOLATION="1")
+    proc, result = invoke(mode, runner_script, env, tmp_path, ["sh", "-c", SHOW])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "gz=mine ign=mine_too " in proc.stdout
+    assert "WITHOUT isolation" in proc.stdout
+    assert load_result(result).properties["gz_partition"] == "mine"
+
+
+def test_disable_ros_isolation_by_env_lets_env_set_a_partition(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    options = ["--env", "DISABLE_ROS_ISOLATION=1", "--env", "GZ_PARTITION=mine"]
+    proc, _ = invoke("runner", runner_script, env, tmp_path, ["sh", "-c", SHOW], options)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "gz=mine ign=unset " in proc.stdout
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_switch_off_sets_no_partition_and_keeps_a_preset_one(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env[partition.OPT_OUT_ENV] = "off"
+    proc, result = invoke(mode, runner_script, env, tmp_path, ["sh", "-c", SHOW])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "gz=unset ign=unset " in proc.stdout
+    assert "Gazebo transport partition not set (ROS_ISOLATED_TEST_GZ_PARTITION=off)" in (
+        proc.stdout
+    )
+    properties = load_result(result).properties
+    assert properties["gz_partition"] == "not set (ROS_ISOLATED_TEST_GZ_PARTITION=off)"
+    assert properties["ros_domain_id"] == str(domain_of(proc.stdout))  # still isolated
+    env["GZ_PARTITION"] = "mine"
+    kept, _ = invoke(mode, runner_script, env, tmp_path, ["sh", "-c", SHOW])
+    assert kept.returncode == 0, kept.stdout + kept.stderr
+    assert "gz=mine ign=unset " in kept.stdout
+
+
+def test_the_switch_off_through_env_as_cmake_env_passes_it(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    options = ["--env", f"{partition.OPT_OUT_ENV}=off"]
+    proc, _ = invoke("runner", runner_script, env, tmp_path, ["sh", "-c", SHOW], options)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "gz=unset ign=unset " in proc.stdout
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_bad_switch_value_is_a_usage_error_with_a_result_file(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env[partition.OPT_OUT_ENV] = "sometimes"
+    proc, result = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists()
+    line = the_error_line(proc)
+    assert "ROS_ISOLATED_TEST_GZ_PARTITION='sometimes' is neither on nor off" in line
+    assert load_result(result).only.message == line
