@@ -214,7 +214,12 @@ def test_ctest_timeout_leaves_nothing_running_and_the_placeholder_says_timeout(
             stderr=subprocess.STDOUT,
         )
     try:
-        _poll((pids / "main").exists, 10, "the test wrote no PIDs")
+        # The daemon notes its PID on its own time: main only waits for its parent.
+        _poll(
+            lambda: (pids / "main").exists() and (pids / "daemon").exists(),
+            10,
+            "the test wrote no PIDs",
+        )
         main = int((pids / "main").read_text())
         daemon = int((pids / "daemon").read_text())
         main_stat, daemon_stat = _stat(main), _stat(daemon)
@@ -272,17 +277,24 @@ def _colcon_test(base: Path, extra_env: dict[str, str]) -> Iterator[subprocess.P
     """``colcon test --ctest-args -j6`` in a process group of its own, as a terminal's job."""
     env = ws.colcon_env()
     env.update(extra_env)
-    with (base / "colcon-test.log").open("wb") as out:
-        process = subprocess.Popen(
-            ["colcon", "--log-base", str(base / "log"), "test", *ws._common(base),
-             "--ctest-args", "-j6"],
-            cwd=base.parent,
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )  # fmt: skip
+    # As in a terminal: a suite started in the background (``cmd &`` in a script) ignores
+    # SIGINT, and exec keeps an ignored signal: colcon would never see the Ctrl-C. A handler
+    # of ours becomes the default in the child.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with (base / "colcon-test.log").open("wb") as out:
+            process = subprocess.Popen(
+                ["colcon", "--log-base", str(base / "log"), "test", *ws._common(base),
+                 "--ctest-args", "-j6"],
+                cwd=base.parent,
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )  # fmt: skip
+    finally:
+        signal.signal(signal.SIGINT, previous)
     try:
         yield process
     finally:

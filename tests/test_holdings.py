@@ -235,3 +235,75 @@ def test_a_waiting_runner_gets_the_resource_when_its_holder_dies(lock_dir: Path)
             if child.poll() is None:
                 child.kill()
             child.wait()
+
+
+def test_a_resource_lock_held_elsewhere_never_outlasts_the_wait_timeout(lock_dir: Path) -> None:
+    """Whoever holds the lock (a stopped runner, another user) cannot keep a waiter forever."""
+    ids = free_ids(1)
+    script = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "from ros_isolated_test.domain_coordinator.reservation import DomainCoordinator\n"
+        "c = DomainCoordinator(Path(sys.argv[1]), [int(sys.argv[2])], {'gpu': 1}, {'gpu': 1})\n"
+        "try:\n"
+        "    c.acquire(['waiter'], wait_timeout=float(sys.argv[3])).release()\n"
+        "except Exception as error:\n"
+        "    print(type(error).__name__)\n"
+        "else:\n"
+        "    print('got')\n"
+    )
+
+    def waiter(wait: str) -> str:
+        done = subprocess.run(
+            [sys.executable, "-c", script, str(lock_dir), str(ids[0]), wait],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import fcntl, os, sys, time\n"
+            "fd = os.open(sys.argv[1], os.O_RDONLY | os.O_CREAT, 0o666)\n"
+            "fcntl.flock(fd, fcntl.LOCK_EX)\n"
+            "print('locked', flush=True)\n"
+            "time.sleep(600)\n",
+            str(lock_dir / holdings.MUTEX),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None
+        assert holder.stdout.readline().strip() == "locked"
+        assert waiter("1") == "PoolExhaustedError"
+    finally:
+        holder.kill()
+        holder.wait()
+    # Control: with the lock free, the same request gets its GPU at once.
+    assert waiter("1") == "got"
+
+
+def test_only_runners_ahead_or_holding_can_disagree_with_a_newcomer(lock_dir: Path) -> None:
+    """A runner that queues later with another capacity is told; those waiting are not."""
+    queue = Queue(lock_dir)
+    mine = queue.enter(["first"], holdings.ticket_fields({"gpu": 1}, {"gpu": 1}, True), True)
+    later = queue.enter(["later"], holdings.ticket_fields({"gpu": 1}, {"gpu": 2}, True), True)
+    assert mine is not None and later is not None
+    try:
+        assert mine.name < later.name
+        holdings.picture(lock_dir, queue, {"gpu": 1}, {"gpu": 1}, mine.name)
+        # Control: the same look with the later ticket counted (a newcomer behind both).
+        with pytest.raises(CapacityConflictError, match=f"runner pid {os.getpid()} has 2"):
+            holdings.picture(lock_dir, queue, {"gpu": 1}, {"gpu": 1}, None)
+        # And the later runner, looking at who is ahead of it, is told.
+        with pytest.raises(CapacityConflictError, match="this one has 2"):
+            holdings.picture(lock_dir, queue, {"gpu": 1}, {"gpu": 2}, later.name)
+    finally:
+        later.close()
+        mine.close()

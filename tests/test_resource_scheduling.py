@@ -42,6 +42,7 @@ from helpers.processes import poll_until
 from helpers.resource_probe import ended, peaks, starts
 from helpers.results import load_result, result_error
 
+from ros_isolated_test.domain_coordinator import holdings
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV, parse
 from ros_isolated_test.runner.settings import WAIT_TIMEOUT_ENV
 
@@ -589,3 +590,39 @@ def test_resources_are_released_only_once_the_whole_process_tree_is_gone(
     order = resource_probe.events(probes.log)
     assert order.index(("end", "parent")) < order.index(("end", "child")), order
     assert order.index(("end", "child")) < order.index(("start", "waiter")), order
+
+
+def test_a_rerun_that_meets_another_capacity_stops_with_the_attempts_kept(
+    env: dict[str, str], lock_dir: Path, tmp_path: Path, started: list[subprocess.Popen[bytes]]
+) -> None:
+    """Between attempts a runner told another capacity takes a hold: the series ends, said."""
+    env = {
+        **env,
+        CAPACITY_ENV: "gpu=1",
+        "ROS_ISOLATED_TEST_DOMAINS": ",".join(map(str, free_ids(2))),
+    }
+    ready, go, result = tmp_path / "ready", tmp_path / "go", tmp_path / "result.xml"
+    script = f"touch {ready}; while [ ! -e {go} ]; do sleep 0.05; done; exit 1"
+    log = tmp_path / "runner.log"
+    runner = start_cli(
+        ["run", "--rerun-failures", "1", "--resources", "gpu=1", "--junit-xml", str(result),
+         "--", "sh", "-c", script],
+        env,
+        log,
+        started,
+    )  # fmt: skip
+    poll_until(lambda: ready.exists() or runner.poll() is not None, "attempt 1 never ran")
+    assert ready.exists(), log.read_text()
+    other = holdings.hold(lock_dir, ["told gpu=2"], {"gpu": 1}, {"gpu": 2}, None)
+    assert other is not None
+    try:
+        go.touch()
+        assert runner.wait(timeout=HUNG) == 1, log.read_text()
+    finally:
+        other.close()
+    said = log.read_text()
+    assert "Traceback" not in said, said
+    assert "attempt 2 did not run: runners disagree on the capacity of gpu" in said, said
+    summary = load_result(result)
+    assert "runners disagree" in summary.properties["rerun_not_run"], summary.properties
+    assert summary.properties["exit"] == "exited with code 1", summary.properties

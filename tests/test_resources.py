@@ -84,6 +84,8 @@ def test_memory_units_are_powers_of_1024(mem: str, size: int) -> None:
         ("gpü=1", "'gpü' is not a resource name"),
         ("a" * (MAX_NAME + 1) + "=1", "is not a resource name"),
         ("gpu=1,gpu=2", "gpu is given twice; give it once"),
+        # Records keep 16 names: a 17th would be held unseen by everyone else.
+        (",".join(f"r{i}=1" for i in range(17)), "17 resources named; name at most 16"),
         ("gpu=0", "gpu='0' is zero; give a positive amount or leave gpu out"),
         ("mem=0K", "mem='0K' is zero"),
         ("gpu=-1", "gpu='-1' is not a whole amount; write e.g. gpu=2"),
@@ -105,6 +107,10 @@ def test_every_error_is_one_line_naming_its_origin(text: str, says: str) -> None
     message = str(raised.value)
     assert message.startswith(f"{ORIGIN}: ") and says in message, message
     assert "\n" not in message
+
+
+def test_sixteen_names_are_fine() -> None:
+    assert len(parse(",".join(f"r{i}=1" for i in range(16)), ORIGIN)) == 16
 
 
 def test_the_origin_is_the_one_given() -> None:

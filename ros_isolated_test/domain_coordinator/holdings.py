@@ -28,7 +28,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from ros_isolated_test.domain_coordinator import holder
-from ros_isolated_test.domain_coordinator.flock import wait_lock
+from ros_isolated_test.domain_coordinator.flock import try_lock
 from ros_isolated_test.domain_coordinator.queue import (
     RESOURCE_MARK,
     Queue,
@@ -248,12 +248,18 @@ class Picture:
 
 
 def picture(
-    lock_dir: Path, queue: Queue, wanted: dict[str, int], capacity: dict[str, int]
+    lock_dir: Path,
+    queue: Queue,
+    wanted: dict[str, int],
+    capacity: dict[str, int],
+    before: str | None = None,
 ) -> Picture:
     """Read the holds and the queue; raise :class:`CapacityConflictError` on a disagreement.
 
     Only the capacity of what we ask for must agree: a runner told ``gpu=2`` while we
-    were told ``gpu=1`` would hand out a GPU we think is taken.
+    were told ``gpu=1`` would hand out a GPU we think is taken. Compared with every hold
+    and with waiters earlier than ``before`` (see :meth:`Picture.may_go`): the runner that
+    came with another capacity is the one told, not everyone already waiting.
     """
     held = holds(lock_dir)
     waiting = demands(queue)
@@ -262,7 +268,10 @@ def picture(
         (name, amount, hold.pid) for hold in held for name, amount in hold.capacity.items()
     ]
     others += [
-        (name, amount, demand.pid) for demand in waiting for name, amount in demand.capacity.items()
+        (name, amount, demand.pid)
+        for demand in waiting
+        if before is None or demand.name < before
+        for name, amount in demand.capacity.items()
     ]
     for name, amount, pid in others:
         if name in wanted and amount != capacity.get(name):
@@ -280,7 +289,14 @@ def _open_mutex(path: Path) -> int | None:
     """A descriptor of a mutex file (created shared if missing); None if something is planted."""
     flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
     try:
-        fd = os.open(path, flags | os.O_CREAT, 0o666)
+        # Created exclusively, else opened without O_CREAT: in a sticky directory,
+        # fs.protected_regular refuses O_CREAT on another user's existing file.
+        fd = os.open(path, flags | os.O_CREAT | os.O_EXCL, 0o666)
+    except FileExistsError:
+        try:
+            fd = os.open(path, flags)
+        except OSError:
+            return None
     except OSError:
         return None
     try:
@@ -298,27 +314,27 @@ def _open_mutex(path: Path) -> int | None:
 
 
 @contextlib.contextmanager
-def mutex(lock_dir: Path) -> Iterator[str | None]:
-    """Hold the machine-wide lock for deciding and taking resources (a few milliseconds).
+def mutex(lock_dir: Path) -> Iterator[bool]:
+    """Try for the machine-wide lock for deciding and taking resources (a few milliseconds).
 
-    Yields None, or one line when the shared lock file was planted and this user's own
-    one stands in: runners of this user still exclude each other, and the claims still
-    bind everyone.
+    Yields whether it is held. Never waits for it: whoever holds it (a runner stopped
+    with Ctrl-Z, another user) must not keep a waiter past its --wait-timeout; a busy
+    lock is one more reason to look again. When the shared lock file was planted, this
+    user's own one stands in: runners of this user still exclude each other, and the
+    claims still bind everyone.
     """
-    problem = None
     fd = _open_mutex(lock_dir / MUTEX)
     if fd is None:
-        problem = (
-            f"the resource lock {lock_dir / MUTEX} is unusable (planted?): runners of this "
-            f"user take resources under their own lock; remove it to restore the shared one"
-        )
         fd = _open_mutex(lock_dir / f"resources.uid{os.getuid()}.lock")
     if fd is None:
-        yield problem
+        yield True  # nothing to lock with: the claims alone keep the order
         return
     try:
-        wait_lock(fd)
-        yield problem
+        try:
+            held = try_lock(fd)
+        except OSError:
+            held = True
+        yield held
     finally:
         os.close(fd)
 

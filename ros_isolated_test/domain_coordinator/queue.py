@@ -391,12 +391,12 @@ def record_amounts(value: object) -> dict[str, int]:
     A planted record may hold anything: names and amounts as a request allows, at most
     16 of them.
     """
-    from ros_isolated_test.domain_coordinator.resources import MAX_AMOUNT, MAX_NAME
+    from ros_isolated_test.domain_coordinator.resources import MAX_AMOUNT, MAX_NAME, MAX_NAMES
 
     if not isinstance(value, dict):
         return {}
     amounts: dict[str, int] = {}
-    for name, amount in list(value.items())[:16]:
+    for name, amount in list(value.items())[:MAX_NAMES]:
         if (
             isinstance(name, str)
             and 0 < len(name) <= MAX_NAME

@@ -474,8 +474,10 @@ class DomainCoordinator:
             if before != "" and self._id_ahead(queue, before):
                 return None, False
             return self.try_reserve(command), True
-        with holdings.mutex(self.lock_dir):
-            board = holdings.picture(self.lock_dir, queue, self.resources, self.capacity)
+        with holdings.mutex(self.lock_dir) as held:
+            if not held:
+                return None, True  # someone is deciding: look again soon
+            board = holdings.picture(self.lock_dir, queue, self.resources, self.capacity, before)
             mine = holdings.Demand(before or "", self.resources, domain)
             fits, turn = board.may_go(mine, before)
             if not fits:

@@ -23,6 +23,8 @@ CPU = "cpu"
 MEM = "mem"
 #: Longest resource name: names land in file records and in every status line.
 MAX_NAME = 32
+#: Most names in one request or capacity: records hold no more.
+MAX_NAMES = 16
 #: Largest amount of anything (an exabyte of memory): no overflow, no absurd typo.
 MAX_AMOUNT = 1 << 60
 _UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
@@ -106,6 +108,10 @@ def parse(text: str, origin: str) -> dict[str, int]:
         if name in amounts:
             raise ResourceSpecError(f"{origin}: {name} is given twice; give it once")
         amounts[name] = _amount(name, value, origin)
+    if len(amounts) > MAX_NAMES:
+        raise ResourceSpecError(
+            f"{origin}: {len(amounts)} resources named; name at most {MAX_NAMES}"
+        )
     return amounts
 
 

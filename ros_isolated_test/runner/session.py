@@ -342,7 +342,7 @@ def _reruns(
             if guard.late is not None:
                 raise Interrupted(guard.late)
             outcome, domain_id = _attempt(request, policy, config, result, capture, guard)
-        except (PoolExhaustedError, LockDirError) as error:
+        except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
             capture.note(f"attempt {number} did not run: {error}")
             result.properties["rerun_not_run"] = str(error)
             break
