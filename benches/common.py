@@ -245,6 +245,20 @@ def run_timed(
     return Timed(seconds, proc.returncode, int(usage.ru_maxrss))
 
 
+def timed_ctest(build_dir: Path, jobs: int, env: Mapping[str, str]) -> tuple[float, str]:
+    """``ctest --test-dir BUILD -jN``: its wall seconds and its merged output."""
+    start = time.perf_counter()
+    proc = subprocess.run(
+        ["ctest", "--test-dir", str(build_dir), f"-j{jobs}"],
+        env=dict(env),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        check=False,
+    )
+    return time.perf_counter() - start, proc.stdout
+
+
 def interleaved(reps: int, runners: Sequence[str] = RUNNERS) -> Iterator[tuple[int, str]]:
     """(repetition, runner) pairs, the order flipped every repetition (ABBA...).
 

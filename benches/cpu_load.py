@@ -24,12 +24,11 @@ import os
 import re
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from common import OURS, Context, Section, median, progress, secs, verdict
+from common import OURS, Context, Section, median, progress, secs, timed_ctest, verdict
 
 #: A test fails when its wall time exceeds this many times its own CPU time.
 STRETCH_LIMIT = 2.0
@@ -143,22 +142,13 @@ def _round(ctx: Context, build: Path, jobs: int, cpus: int) -> Round:
     log.unlink(missing_ok=True)
     env = ctx.environment(OURS, ROS_ISOLATED_TEST_CAPACITY=f"cpu={cpus}")
     env.pop("ROS_ISOLATED_TEST_RESOURCES", None)
-    start = time.perf_counter()
-    proc = subprocess.run(
-        ["ctest", "--test-dir", str(build), f"-j{jobs}"],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        check=False,
-    )
-    wall = time.perf_counter() - start
+    wall, output = timed_ctest(build, jobs, env)
     stretches = []
     if log.exists():
         for line in log.read_text().splitlines():
             took, cpu = map(float, line.split())
             stretches.append(took / cpu if cpu > 0 else float("inf"))
-    match = _SUMMARY.search(proc.stdout)
+    match = _SUMMARY.search(output)
     total = int(match[3]) if match else 0
     failed = int(match[2]) if match else 0
     missed = sum(stretch > STRETCH_LIMIT for stretch in stretches)

@@ -10,9 +10,7 @@ Isolation should cost nothing visible here: the tests' own seconds dominate.
 from __future__ import annotations
 
 import re
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 from common import (
@@ -27,6 +25,7 @@ from common import (
     progress,
     ratio,
     secs,
+    timed_ctest,
 )
 
 sys.path.insert(0, str(REPO / "examples"))
@@ -46,17 +45,8 @@ def _ctest(ctx: Context, build_dir: Path, jobs: int) -> tuple[float, int, int]:
     colcon = crosstalk_workspace.colcon_env()  # the venv's bin/ and prefix first, as colcon
     env["PATH"] = colcon["PATH"]
     env["CMAKE_PREFIX_PATH"] = colcon["CMAKE_PREFIX_PATH"]
-    start = time.perf_counter()
-    proc = subprocess.run(
-        ["ctest", "--test-dir", str(build_dir), f"-j{jobs}"],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        check=False,
-    )
-    wall = time.perf_counter() - start
-    match = _SUMMARY.search(proc.stdout)
+    wall, output = timed_ctest(build_dir, jobs, env)
+    match = _SUMMARY.search(output)
     if match is None:
         return wall, 0, 0
     total = int(match[3])
