@@ -14,14 +14,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
-from helpers.commands import ament_args, run_cli, run_runner
+from helpers.commands import (
+    ERROR_PREFIX,
+    MODES,
+    the_error_line,
+    through,
+)
 from helpers.results import domain_of, load_result
 
 from ros_isolated_test.runner import environment, partition, settings
 from ros_isolated_test.runner.request import EnvAssignment
 
-ERROR_PREFIX = "ros-isolated-test: error: "
-MODES = ["shell", "runner"]
 #: What the test prints: the partition variables it got, and its runner's PID.
 SHOW = 'echo "gz=${GZ_PARTITION-unset} ign=${IGN_PARTITION-unset} runner=$PPID"'
 SAFE = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
@@ -166,18 +169,7 @@ def invoke(
 ) -> tuple[subprocess.CompletedProcess[str], Path]:
     """``command`` through ``run --junit-xml`` or the RUNNER (with ``options``); and its file."""
     result = cwd / "out" / "pkg" / "t.xml"
-    if mode == "shell":
-        assert not options
-        return run_cli(["run", "--junit-xml", str(result), "--", *command], env, cwd=cwd), result
-    args = ament_args(result, command, "--generate-result-on-success", *options)
-    return run_runner(runner_script, args, env, cwd=cwd), result
-
-
-def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
-    lines = proc.stderr.splitlines()
-    assert len(lines) == 1, f"expected exactly one line on stderr, got:\n{proc.stderr}"
-    assert lines[0].startswith(ERROR_PREFIX), lines[0]
-    return lines[0].removeprefix(ERROR_PREFIX)
+    return through(mode, runner_script, env, cwd, command, result, options), result
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -208,7 +200,7 @@ def test_a_preset_partition_is_refused_and_nothing_runs(
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists(), "a refused test must not run"
     assert "Running with ROS_DOMAIN_ID" not in proc.stdout
-    line = the_error_line(proc)
+    line = the_error_line(proc).removeprefix(ERROR_PREFIX)
     assert f"{variable} is already set to 'shared_sim'" in line
     assert f"unset {variable}" in line and "DISABLE_ROS_ISOLATION=1" in line
     case = load_result(result).only
@@ -229,7 +221,7 @@ def test_a_partition_passed_with_env_to_the_runner_is_refused(
     proc, result = invoke("runner", runner_script, env, tmp_path, ["touch", "ran"], options)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
-    line = the_error_line(proc)
+    line = the_error_line(proc).removeprefix(ERROR_PREFIX)
     assert f"{variable}='shared_sim' is passed with --env" in line
     assert load_result(result).only.message == line
 
@@ -292,6 +284,6 @@ def test_a_bad_switch_value_is_a_usage_error_with_a_result_file(
     proc, result = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
-    line = the_error_line(proc)
+    line = the_error_line(proc).removeprefix(ERROR_PREFIX)
     assert "ROS_ISOLATED_TEST_GZ_PARTITION='sometimes' is neither on nor off" in line
     assert load_result(result).only.message == line

@@ -8,57 +8,17 @@ Kilted, whose upstream runner silently replaces a preset ID instead.
 
 from __future__ import annotations
 
-import subprocess
-from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
-from helpers.commands import run_cli, run_runner
+from helpers.commands import (
+    ERROR_PREFIX,
+    MODES,
+    the_error_line,
+    through,
+)
 from helpers.distros import Tools
 from helpers.results import load_result
-
-ERROR_PREFIX = "ros-isolated-test: error: "
-MODES = ["shell", "runner"]
-
-
-def invoke(
-    mode: str,
-    runner_script: str,
-    env: dict[str, str],
-    cwd: Path,
-    command: Sequence[str],
-    result: Path | None = None,
-    runner_options: Sequence[str] = (),
-    tools: Tools | None = None,
-) -> subprocess.CompletedProcess[str]:
-    """Run ``command`` through ``ros-isolated-test run`` or the RUNNER script.
-
-    With ``tools``, the CLI and the RUNNER's interpreter are that distro's; else the suite's.
-    """
-    if mode == "shell":
-        assert not runner_options
-        junit = ["--junit-xml", str(result)] if result is not None else []
-        cli = run_cli if tools is None else tools.run_cli
-        return cli(["run", *junit, "--", *command], env, cwd=cwd)
-    result = result if result is not None else cwd / "pkg" / "t.xml"
-    args = [
-        str(result),
-        "--package-name",
-        "pkg",
-        "--generate-result-on-success",
-        *runner_options,
-        "--command",
-        *command,
-    ]
-    runner = run_runner if tools is None else tools.run_runner
-    return runner(runner_script, args, env, cwd=cwd)
-
-
-def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
-    lines = proc.stderr.splitlines()
-    assert len(lines) == 1, f"expected exactly one line on stderr, got:\n{proc.stderr}"
-    assert lines[0].startswith(ERROR_PREFIX), lines[0]
-    return lines[0]
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -73,7 +33,7 @@ def test_preset_domain_id_is_refused_and_nothing_runs(
 ) -> None:
     env = distro_env
     env["ROS_DOMAIN_ID"] = value
-    proc = invoke(mode, distro_runner_script, env, tmp_path, ["touch", "ran"], tools=tools)
+    proc = through(mode, distro_runner_script, env, tmp_path, ["touch", "ran"], tools=tools)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists(), "a refused test must not run"
     assert "Running with ROS_DOMAIN_ID" not in proc.stdout
@@ -93,7 +53,7 @@ def test_refusal_is_recorded_in_the_result_file_as_a_failed_case(
     env = distro_env
     env["ROS_DOMAIN_ID"] = "17"
     result = tmp_path / "out" / "pkg" / "t.xml"
-    proc = invoke(
+    proc = through(
         mode, distro_runner_script, env, tmp_path, ["touch", "ran"], result=result, tools=tools
     )
     assert proc.returncode == 2
@@ -110,7 +70,7 @@ def test_domain_id_passed_with_env_option_is_refused(
     runner_script: str, env: dict[str, str], tmp_path: Path, option: str
 ) -> None:
     result = tmp_path / "pkg" / "t.xml"
-    proc = invoke(
+    proc = through(
         "runner",
         runner_script,
         env,
@@ -137,7 +97,7 @@ def test_disable_ros_isolation_runs_with_the_preset_id_and_warns(
     env["ROS_DOMAIN_ID"] = "42"
     env["DISABLE_ROS_ISOLATION"] = "1"
     result = tmp_path / "pkg" / "t.xml"
-    proc = invoke(
+    proc = through(
         mode, runner_script, env, tmp_path, ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"'], result
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -156,7 +116,7 @@ def test_disable_ros_isolation_lets_env_option_set_the_id(
     runner_script: str, env: dict[str, str], tmp_path: Path
 ) -> None:
     env["DISABLE_ROS_ISOLATION"] = "1"
-    proc = invoke(
+    proc = through(
         "runner",
         runner_script,
         env,
@@ -176,13 +136,13 @@ def test_disable_ros_isolation_0_does_not_disable(
 ) -> None:
     env["DISABLE_ROS_ISOLATION"] = word
     env["ROS_DOMAIN_ID"] = "5"
-    proc = invoke(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    proc = through(mode, runner_script, env, tmp_path, ["touch", "ran"])
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
     assert "ROS_DOMAIN_ID is already set to '5'" in the_error_line(proc)
 
     del env["ROS_DOMAIN_ID"]
-    isolated = invoke(
+    isolated = through(
         mode, runner_script, env, tmp_path, ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"']
     )
     assert isolated.returncode == 0, isolated.stdout + isolated.stderr

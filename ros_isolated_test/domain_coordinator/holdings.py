@@ -347,18 +347,16 @@ def hold(
     domain_id: int | None,
 ) -> Ticket | None:
     """Record our hold (under :func:`mutex`): the ticket to close on release; None if impossible."""
-    extra = (
-        f'"resources": {amounts_json(wanted)}, '
-        f'"capacity": {amounts_json({name: capacity[name] for name in wanted})}, '
-        f'"domain_id": {"null" if domain_id is None else domain_id}'
-    )
+    extra = _asked(wanted, capacity) + f'"domain_id": {"null" if domain_id is None else domain_id}'
     return Queue(lock_dir, HOLD_DIR).enter(command, extra, marked=True)
 
 
 def ticket_fields(wanted: dict[str, int], capacity: dict[str, int], domain: bool) -> str:
     """The extra record fields of a waiter's ticket that asks for resources."""
-    return (
-        f'"resources": {amounts_json(wanted)}, '
-        f'"capacity": {amounts_json({name: capacity[name] for name in wanted})}, '
-        f'"domain": {"true" if domain else "false"}'
-    )
+    return _asked(wanted, capacity) + f'"domain": {"true" if domain else "false"}'
+
+
+def _asked(wanted: dict[str, int], capacity: dict[str, int]) -> str:
+    """The request and the capacity it was made against, as record fields (and a comma)."""
+    given = {name: capacity[name] for name in wanted}
+    return f'"resources": {amounts_json(wanted)}, "capacity": {amounts_json(given)}, '

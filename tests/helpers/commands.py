@@ -11,6 +11,10 @@ import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from helpers.distros import Tools
+
 REPO = Path(__file__).resolve().parents[2]
 #: The virtualenv's bin/, where the CLI, colcon and the test tools are installed.
 BIN = Path(sys.executable).parent
@@ -61,6 +65,47 @@ def run_runner(
 ) -> subprocess.CompletedProcess[str]:
     """The RUNNER script exactly as ctest calls it: ``python3 -u <script> ARGS``."""
     return run_process([sys.executable, "-u", runner_script, *args], env, **kwargs)
+
+
+#: How every runner error line starts.
+ERROR_PREFIX = "ros-isolated-test: error: "
+#: The two ways a test is run: ``run`` from a shell, and the ctest RUNNER script.
+MODES = ["shell", "runner"]
+
+
+def through(
+    mode: str,
+    runner_script: str,
+    env: dict[str, str],
+    cwd: Path,
+    command: Sequence[str],
+    result: Path | None = None,
+    runner_options: Sequence[str] = (),
+    tools: Tools | None = None,
+) -> subprocess.CompletedProcess[str]:
+    """Run ``command`` through ``ros-isolated-test run`` (``mode`` "shell") or the RUNNER.
+
+    The RUNNER writes ``result`` (default ``cwd/pkg/t.xml``) with
+    ``--generate-result-on-success`` and ``runner_options``. With ``tools``, the CLI and the
+    RUNNER's interpreter are that distro's; else the suite's.
+    """
+    if mode == "shell":
+        assert not runner_options
+        junit = ["--junit-xml", str(result)] if result is not None else []
+        cli = run_cli if tools is None else tools.run_cli
+        return cli(["run", *junit, "--", *command], env, cwd=cwd)
+    result = result if result is not None else cwd / "pkg" / "t.xml"
+    args = ament_args(result, command, "--generate-result-on-success", *runner_options)
+    runner = run_runner if tools is None else tools.run_runner
+    return runner(runner_script, args, env, cwd=cwd)
+
+
+def the_error_line(proc: subprocess.CompletedProcess[str]) -> str:
+    """The runner's one line on stderr, which must start with :data:`ERROR_PREFIX`."""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, f"expected exactly one line on stderr, got:\n{proc.stderr}"
+    assert lines[0].startswith(ERROR_PREFIX), lines[0]
+    return lines[0]
 
 
 def ament_args(
