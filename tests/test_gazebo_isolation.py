@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -73,10 +74,31 @@ class Probes:
                 )
 
     def finish(self) -> None:
-        """All three ended, each passed (heard itself, met the others)."""
-        codes = [process.wait(HUNG * 3) for process in self.processes]
-        logs = {token: self.log(token).read_text(errors="replace") for token in self.tokens}
-        assert codes == [0] * PROBES, logs
+        """All three ended, each passed (heard itself, met the others).
+
+        A probe that fails makes its peers stop at once (``gz_probe``), so the wait ends
+        with the reason; the deadline, inside pytest's timeout, only stops a hang and then
+        still shows every log.
+        """
+        deadline = time.monotonic() + HUNG * 2
+        for process in self.processes:
+            try:
+                process.wait(max(deadline - time.monotonic(), 1))
+            except subprocess.TimeoutExpired:
+                self.stop()
+        codes = [process.returncode for process in self.processes]
+        assert codes == [0] * PROBES, self.evidence()
+
+    def evidence(self) -> str:
+        """Every probe's runner log and every rendezvous file: why a group failed."""
+        parts = [
+            f"--- {path.name}\n{path.read_text(errors='replace')}"
+            for path in (
+                *(self.log(token) for token in self.tokens),
+                *sorted(self.rendezvous.iterdir()),
+            )
+        ]
+        return "\n".join(parts)
 
     def heard(self, token: str) -> set[str]:
         return set((self.rendezvous / f"heard-{token}").read_text().split())
