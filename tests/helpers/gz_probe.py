@@ -40,6 +40,9 @@ SELF_TRIES = 60
 FRESH_LISTENER_EVERY = 15
 #: Seconds to wait for peers: a hang stopper, never a verdict on a loaded machine.
 PATIENCE = 150.0
+#: How a failure file starts when the transport failed, and when a peer did.
+NEVER_HEARD = "never heard itself"
+PEER_FAILED = "a peer failed"
 _HEARD = re.compile(r'data: "([^"]*)"')
 
 
@@ -121,7 +124,7 @@ def wait_for_all(rendezvous: Path, stage: str, peers: int) -> None:
         failed = sorted(rendezvous.glob("failed-*"))
         if failed:
             reasons = "; ".join(f"{path.name}: {path.read_text().strip()}" for path in failed)
-            raise ProbeFailed(4, f"a peer failed before {stage}: {reasons}")
+            raise ProbeFailed(4, f"{PEER_FAILED} before {stage}: {reasons}")
         if time.monotonic() > deadline:
             raise ProbeFailed(4, f"the other probes never reached {stage}")
         time.sleep(0.05)
@@ -137,7 +140,7 @@ def probe(tool: str, rendezvous: Path, token: str, peers: int) -> list[str]:
             if tries == SELF_TRIES or time.monotonic() > deadline:
                 raise ProbeFailed(
                     3,
-                    f"never heard itself on {TOPIC} after {tries} publications "
+                    f"{NEVER_HEARD} on {TOPIC} after {tries} publications "
                     f"({listener.starts} listener start(s))",
                 )
             if tries and tries % FRESH_LISTENER_EVERY == 0:
