@@ -634,6 +634,36 @@ def test_the_waiting_line_names_the_holder_not_its_test_as_a_squatter(
     assert "squatter" not in line, line
 
 
+def test_the_waiting_line_says_a_free_id_goes_to_an_earlier_waiter_first(
+    tenants: Tenants, env: dict[str, str], pool_of_one: int
+) -> None:
+    """An ID is free but an earlier waiter is to have it: the line says so, not "in use".
+
+    The earlier waiter is stopped (SIGSTOP) once the ID comes free, so the newcomer waits
+    behind it with the ID free for as long as the test needs. The control is the
+    earlier waiter's own line, written while the pool really was in use.
+    """
+    first = tenants.holding()
+    second = tenants.queued("--wait-timeout", "300", hold=True)
+    os.kill(second.process.pid, signal.SIGSTOP)
+    try:
+        assert first.release() == 0, first.output()
+        third = tenants.queued("--wait-timeout", "300")
+    finally:
+        os.kill(second.process.pid, signal.SIGCONT)
+    (control, *_) = WAITING.findall(second.output())
+    assert "all 1 IDs of the pool are in use" in control, control
+    (line, *_) = WAITING.findall(third.output())
+    assert "1 runner(s) ahead" in line, line
+    assert "1 of 1 IDs free, for earlier waiters first" in line, line
+    # And the order holds: the earlier waiter has the ID before the newcomer.
+    _poll(second.got_id, 60, "the earlier waiter did not get the free ID")
+    assert third.got_id() is None, third.output()
+    assert second.release() == 0, second.output()
+    _poll(third.got_id, 60, "the newcomer did not get the ID after the earlier waiter")
+    assert third.release() == 0, third.output()
+
+
 def test_the_waiting_line_is_refreshed_with_the_new_holder(
     tenants: Tenants, env: dict[str, str], pool_of_one: int
 ) -> None:

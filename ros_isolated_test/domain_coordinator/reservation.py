@@ -551,10 +551,17 @@ class DomainCoordinator:
                 f"waiting for {describe(self.resources)} ({waited:.1f} s of {limit:g} s, "
                 f"{ahead} runner(s) ahead): {self._short}"
             )
+        from ros_isolated_test.domain_coordinator.status import pool_usage
+
+        held, holders = pool_usage(self.lock_dir, self.pool)
+        if held < len(self.pool):
+            # Free IDs, but an earlier waiter takes the next one first (first come, first served).
+            why = f"{len(self.pool) - held} of {len(self.pool)} IDs free, for earlier waiters first"
+        else:
+            why = f"all {len(self.pool)} IDs of the pool are in use"
         return (
             f"waiting for a free ROS_DOMAIN_ID ({waited:.1f} s of {limit:g} s, "
-            f"{ahead} runner(s) ahead): all {len(self.pool)} IDs of the pool are in use: "
-            f"{self._holders()}"
+            f"{ahead} runner(s) ahead): {why}: {holders}"
         )
 
     def _gave_up(self, how: str, waited: float) -> PoolExhaustedError:

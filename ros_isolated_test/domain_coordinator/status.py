@@ -105,9 +105,15 @@ def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
 
 def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> str:
     """A short line naming who uses the pool, for waiting and exhaustion messages."""
+    return pool_usage(lock_dir, pool, limit)[1]
+
+
+def pool_usage(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> tuple[int, str]:
+    """How many IDs of the pool are held, and the line of :func:`describe_holders`."""
     wanted = set(pool)
     parts: list[str] = []
     items = [item for item in held_domains(lock_dir, pool) if item.domain_id in wanted]
+    held = len({item.domain_id for item in items})
     for item in items[:limit]:
         if item.holder is not None:
             kind = {"environment": "squatter ", "survivor": "survivor "}.get(item.via, "")
@@ -119,7 +125,7 @@ def describe_holders(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> s
             parts.append(f"{item.domain_id}: {_anonymous(item)}")
     if len(items) > limit:
         parts.append(f"and {len(items) - limit} more")
-    return "; ".join(parts) or "see ros-isolated-test status"
+    return held, "; ".join(parts) or "see ros-isolated-test status"
 
 
 def _anonymous(item: HeldDomain) -> str:
