@@ -357,9 +357,11 @@ def status(as_json: bool) -> None:
     click.echo(f"{'PID':>7}  {'USER':<10} {'SINCE':<19}  {'ID':>3}  {'HOLDS':<20} COMMAND")
     for hold in held_resources:
         domain = "-" if hold.domain_id is None else str(hold.domain_id)
+        # A hold its runner left to survivors of its test: they are what keeps it.
+        kept = f"(survivors {', '.join(map(str, hold.survivors))}) " if hold.survivors else ""
         click.echo(
             f"{hold.pid:>7}  {hold.user:<10.10} {iso_time(hold.since):<19}  {domain:>3}  "
-            f"{describe(hold.resources):<20} {hold.command}"
+            f"{describe(hold.resources):<20} {kept}{hold.command}"
         )
 
 

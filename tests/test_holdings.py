@@ -7,13 +7,16 @@ files and processes; the end-to-end behaviour of runners is in test_resource_sch
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from helpers.commands import run_cli
 from helpers.domains import free_ids
 from helpers.processes import poll_until
 
@@ -30,6 +33,7 @@ from ros_isolated_test.domain_coordinator.reservation import (
     PoolExhaustedError,
     ResourcesBusyError,
 )
+from ros_isolated_test.process import proc
 
 CAPACITY = {"cpu": 4, "gpu": 1}
 
@@ -307,3 +311,77 @@ def test_only_runners_ahead_or_holding_can_disagree_with_a_newcomer(lock_dir: Pa
     finally:
         later.close()
         mine.close()
+
+
+# -- survivors: a test's process the runner could not end keeps what it held ----------------
+
+
+@pytest.fixture
+def survivor() -> Iterator[subprocess.Popen[bytes]]:
+    """A live process standing for one the runner could not end (its own, to end later)."""
+    process = subprocess.Popen(["sleep", "600"])
+    yield process
+    process.kill()
+    process.wait()
+
+
+def _stat(pid: int) -> proc.Stat:
+    found = proc.read_stat(pid)
+    assert found is not None
+    return found
+
+
+@pytest.mark.parametrize("with_id", [True, False], ids=["with-an-id", "isolation-disabled"])
+def test_resources_stay_held_while_a_survivor_lives_and_come_free_after(
+    lock_dir: Path, env: dict[str, str], survivor: subprocess.Popen[bytes], with_id: bool
+) -> None:
+    """Like the ID: released only once the test's whole tree is gone, even after its runner."""
+    ids = free_ids(2)
+    first = DomainCoordinator(lock_dir, ids[:1], {"gpu": 1}, {"gpu": 1})
+    taken = first.acquire(["first"]) if with_id else first.hold_resources(["first"])
+    record = taken.block_for([_stat(survivor.pid)])
+    taken.release()
+    # The runner let go; the survivor keeps the GPU, and status names it.
+    [kept] = holdings.holds(lock_dir)
+    assert (kept.resources, kept.survivors) == ({"gpu": 1}, (survivor.pid,))
+    assert f"survivor(s) {survivor.pid} of pid {os.getpid()}" in kept.describe()
+    assert kept.as_dict()["survivors"] == [survivor.pid]
+    shown = run_cli(["status"], env)
+    assert f"(survivors {survivor.pid}) first" in shown.stdout, shown.stdout
+    rows = json.loads(run_cli(["status", "--json"], env).stdout)
+    assert [row.get("survivors") for row in rows if row["via"] == "hold"] == [[survivor.pid]]
+    other = DomainCoordinator(lock_dir, ids[1:], {"gpu": 1}, {"gpu": 1})
+    with pytest.raises(ResourcesBusyError, match=rf"survivor\(s\) {survivor.pid} "):
+        other.acquire(["second"])
+    # The control: once it is gone the kept hold counts for nothing, and is removed.
+    survivor.kill()
+    survivor.wait()
+    again = other.acquire(["third"])
+    again.release()
+    assert holdings.holds(lock_dir) == []
+    kept_files = list((lock_dir / holdings.HOLD_DIR).glob("*" + holdings.KEPT))
+    assert kept_files == [], kept_files
+    assert with_id == record.name.endswith(".blocked")
+
+
+def test_a_kept_hold_of_a_recycled_pid_another_boot_or_a_planted_file_holds_nothing(
+    lock_dir: Path, survivor: subprocess.Popen[bytes]
+) -> None:
+    coordinator = DomainCoordinator(lock_dir, free_ids(1), {"gpu": 1}, {"gpu": 1})
+    hold = coordinator.hold_resources(["first"])
+    path = hold.block_for([_stat(survivor.pid)])
+    hold.release()
+    text = path.read_text()
+    # Control: as written, it holds the GPU.
+    assert [item.survivors for item in holdings.holds(lock_dir)] == [(survivor.pid,)]
+    start = _stat(survivor.pid).start
+    for changed in (
+        text.replace(f"[{survivor.pid}, {start}]", f"[{survivor.pid}, {start + 1}]"),  # recycled
+        text.replace(proc.boot_id(), "another-boot"),
+        '{"resources": {"gpu": 1}, "capacity": {"gpu": 1}, "survivors": "all"}',
+    ):
+        assert changed != text
+        path.write_text(changed)
+        assert holdings.holds(lock_dir) == [], changed
+        path.write_text(text)
+        assert len(holdings.holds(lock_dir)) == 1

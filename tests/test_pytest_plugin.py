@@ -407,6 +407,50 @@ def test_a_leftover_daemon_is_ended_before_the_id_is_released(
     assert not Path(f"/proc/{daemon}").exists()
 
 
+#: The next session's test with isolation disabled: notes that it ran (it has no ID).
+NEXT_TEST_WITHOUT_ID = """\
+import os
+
+def test_runs_next():
+    with open(os.environ["EVENTS"], "a") as out:
+        out.write("next test\\n")
+"""
+
+
+def test_with_isolation_disabled_a_leftover_daemon_is_ended_before_the_resources_are_released(
+    tmp_path: Path, env: dict[str, str], started: list[subprocess.Popen[bytes]]
+) -> None:
+    """The same order when only resources are held: the GPU is free once the tree is gone."""
+    events, pid_file, go = tmp_path / "events", tmp_path / "daemon.pid", tmp_path / "go"
+    shared = {
+        **env,
+        "DISABLE_ROS_ISOLATION": "1",
+        "ROS_ISOLATED_TEST_CAPACITY": "gpu=1",
+        "EVENTS": str(events),
+        "PID_FILE": str(pid_file),
+        "GO": str(go),
+    }
+    leaking = project(tmp_path / "leaking", LEAKING_TEST)
+    following = project(tmp_path / "following", NEXT_TEST_WITHOUT_ID)
+    for root in (leaking, following):
+        (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = gpu=1\n")
+    first = start_pytest(leaking, shared, tmp_path / "first.log", started)
+    wait_for(pid_file)
+    second = start_pytest(following, shared, tmp_path / "second.log", started)
+    poll_until(
+        lambda: "waiting for gpu=1" in (tmp_path / "second.log").read_text(),
+        "the second session queued for the one GPU",
+    )
+    go.touch()
+    assert first.wait(HUNG) == 0, (tmp_path / "first.log").read_text()
+    assert second.wait(HUNG) == 0, (tmp_path / "second.log").read_text()
+    assert events.read_text().splitlines() == ["daemon ended", "next test"]
+    daemon = int(pid_file.read_text())
+    log = (tmp_path / "first.log").read_text()
+    assert f"stopped process {daemon}" in log, log
+    assert not Path(f"/proc/{daemon}").exists()
+
+
 def start_pytest(
     cwd: Path, env: Mapping[str, str], log: Path, into: list[subprocess.Popen[bytes]]
 ) -> subprocess.Popen[bytes]:

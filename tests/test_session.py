@@ -483,3 +483,41 @@ def test_an_embedding_programs_own_child_never_blocks_the_id(
     assert lines[-2] == "codes 0 0", done.stdout + done.stderr  # the second run got the ID
     assert "stays blocked" not in done.stdout
     assert "surviving_processes" not in load_result(tmp_path / "first.xml").properties
+
+
+@pytest.mark.parametrize("disabled", [False, True], ids=["isolated", "isolation-disabled"])
+def test_survivors_keep_the_resources_held_with_the_id_and_say_so(
+    lock_dir: Path, disabled: bool
+) -> None:
+    """A survivor of the work keeps the ID and the GPU: the note names both, status shows it."""
+    from ros_isolated_test.domain_coordinator import holdings
+    from ros_isolated_test.process import proc
+    from ros_isolated_test.runner import environment, session, settings
+
+    ids = free_ids(1)
+    environ = {
+        "ROS_ISOLATED_TEST_LOCK_DIR": str(lock_dir),
+        "ROS_ISOLATED_TEST_DOMAINS": str(ids[0]),
+        "ROS_ISOLATED_TEST_CAPACITY": "gpu=1",
+        **({"DISABLE_ROS_ISOLATION": "1"} if disabled else {}),
+    }
+    config = settings.read(environ, resources="gpu=1")
+    policy = environment.decide((), config, environ)
+    survivor = subprocess.Popen(["sleep", "600"])
+    notes: list[str] = []
+    try:
+        with session.isolation(policy, config, ["work"], notes.append) as held:
+            assert held is not None and held.resources == {"gpu": 1}
+            stat = proc.read_stat(survivor.pid)
+            assert stat is not None
+            held.survivors = [stat]
+        what = "gpu=1 stays" if disabled else f"ROS_DOMAIN_ID {ids[0]} and gpu=1 stay"
+        assert any(
+            note.startswith(f"{what} blocked while {stat.describe()} live") for note in notes
+        ), notes
+        assert [hold.survivors for hold in holdings.holds(lock_dir)] == [(survivor.pid,)]
+    finally:
+        survivor.kill()
+        survivor.wait()
+    # The control: with the survivor gone, nothing is held.
+    assert holdings.holds(lock_dir) == []

@@ -3,7 +3,9 @@
 A runner's hold is a ticket kept in the ``holds`` folder of the lock directory for the
 test's whole life: a flock'ed file whose record says what it holds. The kernel drops the
 flock however the runner dies, and a hold whose file is not locked counts for nothing,
-so resources come free on any death, with no daemon and no timeout.
+so resources come free on any death, with no daemon and no timeout. Like the ID, they
+stay taken while a survivor of the test lives (a process the runner could not end):
+the runner keeps its hold in a survivor record before it lets go (:func:`keep_for`).
 
 Taking is all-or-nothing, under one machine-wide lock (``resources.lock``): a runner
 reads what the live holds use and what earlier waiters ask, decides, and takes its
@@ -24,9 +26,10 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
+from ros_isolated_test.atomic_file import write_atomically
 from ros_isolated_test.domain_coordinator import holder
 from ros_isolated_test.domain_coordinator.flock import try_lock
 from ros_isolated_test.domain_coordinator.queue import (
@@ -42,6 +45,9 @@ from ros_isolated_test.process import proc
 HOLD_DIR = "holds"
 #: The lock every runner taking resources holds while it decides and takes.
 MUTEX = "resources.lock"
+#: How a hold kept for survivors is named: its ticket's name with this in place of
+#: ``.ticket`` (never taken for a ticket, whose lock is what makes it live).
+KEPT = ".survivors"
 
 __all__ = [
     "HOLD_DIR",
@@ -51,6 +57,7 @@ __all__ = [
     "Picture",
     "amounts_json",
     "holds",
+    "keep_for",
     "mutex",
     "picture",
 ]
@@ -63,7 +70,17 @@ class CapacityConflictError(RuntimeError):
 class Hold:
     """What one live runner holds, as its hold record says."""
 
-    __slots__ = ("capacity", "command", "domain_id", "host", "pid", "resources", "since", "user")
+    __slots__ = (
+        "capacity",
+        "command",
+        "domain_id",
+        "host",
+        "pid",
+        "resources",
+        "since",
+        "survivors",
+        "user",
+    )
 
     def __init__(
         self,
@@ -75,6 +92,7 @@ class Hold:
         resources: dict[str, int],
         capacity: dict[str, int],
         domain_id: int | None,
+        survivors: tuple[int, ...] = (),
     ) -> None:
         self.pid = pid
         self.user = user
@@ -85,10 +103,12 @@ class Hold:
         #: The capacity its runner was given for what it holds: all runners must agree.
         self.capacity = capacity
         self.domain_id = domain_id
+        #: For a hold kept after its runner left: the PIDs of the survivors still alive.
+        self.survivors = survivors
 
     def as_dict(self) -> dict[str, object]:
-        """The fields ``status --json`` shows."""
-        return {
+        """The fields ``status --json`` shows (``survivors`` only for a kept hold)."""
+        fields: dict[str, object] = {
             "pid": self.pid,
             "user": self.user,
             "command": self.command,
@@ -97,10 +117,18 @@ class Hold:
             "resources": dict(self.resources),
             "domain_id": self.domain_id,
         }
+        if self.survivors:
+            fields["survivors"] = list(self.survivors)
+        return fields
 
     def describe(self) -> str:
         """``pid 12 (alice) cpu=2,gpu=1 <command>``, for waiting messages."""
-        return f"pid {self.pid} ({self.user}) {describe(self.resources)} {self.command[:60]}"
+        if self.survivors:
+            pids = ", ".join(map(str, self.survivors))
+            who = f"survivor(s) {pids} of pid {self.pid}"
+        else:
+            who = f"pid {self.pid}"
+        return f"{who} ({self.user}) {describe(self.resources)} {self.command[:60]}"
 
 
 class Demand:
@@ -141,28 +169,101 @@ def _records(queue: Queue) -> Iterator[tuple[Path, dict[str, object]]]:
 
 
 def holds(lock_dir: Path) -> list[Hold]:
-    """Every live hold, oldest first. A hold nobody can read holds nothing."""
+    """Every live hold, oldest first, then every hold kept for survivors that still live.
+
+    A hold nobody can read holds nothing.
+    """
     found: list[Hold] = []
     limit = proc.pid_max()
-    for path, data in _records(Queue(lock_dir, HOLD_DIR)):
-        try:
-            owner = holder.user_name(os.lstat(path).st_uid)
-        except OSError:
-            continue  # released meanwhile
-        domain_id = data.get("domain_id")
-        found.append(
-            Hold(
-                pid=holder.record_pid(data.get("pid"), limit) or 0,
-                user=owner,
-                command=holder.record_text(data.get("command"), holder.LONG_TEXT) or "(no record)",
-                since=holder.record_time(data.get("started")) or 0.0,
-                host=holder.record_text(data.get("host")) or "",
-                resources=record_amounts(data.get("resources")),
-                capacity=record_amounts(data.get("capacity")),
-                domain_id=domain_id if type(domain_id) is int and 0 <= domain_id < 1000 else None,
-            )
-        )
+    queue = Queue(lock_dir, HOLD_DIR)
+    for path, data in _records(queue):
+        hold = _hold(path, data, limit)
+        if hold is not None:
+            found.append(hold)
+    return found + _kept(queue, limit)
+
+
+def _hold(
+    path: Path, data: dict[str, object], limit: int, survivors: tuple[int, ...] = ()
+) -> Hold | None:
+    try:
+        owner = holder.user_name(os.lstat(path).st_uid)
+    except OSError:
+        return None  # released meanwhile
+    domain_id = data.get("domain_id")
+    return Hold(
+        pid=holder.record_pid(data.get("pid"), limit) or 0,
+        user=owner,
+        command=holder.record_text(data.get("command"), holder.LONG_TEXT) or "(no record)",
+        since=holder.record_time(data.get("started")) or 0.0,
+        host=holder.record_text(data.get("host")) or "",
+        resources=record_amounts(data.get("resources")),
+        capacity=record_amounts(data.get("capacity")),
+        domain_id=domain_id if type(domain_id) is int and 0 <= domain_id < 1000 else None,
+        survivors=survivors,
+    )
+
+
+def keep_for(holding: Ticket, processes: Iterable[proc.Stat]) -> Path:
+    """Keep a hold's resources while any of ``processes`` (survivors of its test) lives.
+
+    Written beside the hold's ticket before the ticket is closed, so the resources are
+    never free in between. The record is the hold's own, with each process named by PID
+    and start time (a recycled PID is another process), this boot and our PID namespace
+    (only there do those PIDs name them). Raises OSError when it cannot be written.
+    """
+    import json  # only when survivors are kept: never on a test's usual path
+
+    data = holder.parse_record(holder.read_small_file(holding.path)) or {}
+    data["survivors"] = [[process.pid, process.start] for process in processes]
+    data["boot"] = proc.boot_id()
+    data["pidns"] = proc.pid_namespace()
+    stem = holding.path.name.removesuffix(".ticket")
+    path = holding.path.with_name(stem + KEPT)
+    write_atomically(path, json.dumps(data).encode("utf-8"))
+    return path
+
+
+def _kept(queue: Queue, limit: int) -> list[Hold]:
+    """Holds kept for survivors: each counts while one of its processes lives.
+
+    A record of another boot names nobody; one of another PID namespace is not ours to
+    judge, and counts for nothing (as a block record). Our own records whose processes
+    are all gone are removed.
+    """
+    found: list[Hold] = []
+    for folder in queue.folders():
+        with contextlib.suppress(OSError):
+            paths = [Path(entry.path) for entry in os.scandir(folder) if entry.name.endswith(KEPT)]
+            for path in sorted(paths, key=lambda item: item.name):
+                hold = _kept_hold(path, limit)
+                if hold is not None:
+                    found.append(hold)
     return found
+
+
+def _kept_hold(path: Path, limit: int) -> Hold | None:
+    try:
+        data = holder.parse_record(holder.read_small_file(path))
+    except (OSError, ValueError):
+        return None
+    if data is None or data.get("pidns") != proc.pid_namespace():
+        return None
+    named = data.get("survivors")
+    alive: list[int] = []
+    if data.get("boot") == proc.boot_id() and isinstance(named, list):
+        for item in named:
+            if not (isinstance(item, list) and len(item) == 2):
+                continue
+            pid, start = item
+            if holder.record_pid(pid, limit) is None or type(start) is not int:
+                continue
+            if proc.living(pid, start) is not None:
+                alive.append(pid)
+    if not alive:
+        holder.remove_record(path)  # only when ours (a planted or another user's one stays)
+        return None
+    return _hold(path, data, limit, tuple(alive))
 
 
 def demands(queue: Queue) -> list[Demand]:

@@ -128,14 +128,19 @@ class Reservation:
         """Keep the ID from every runner while any of ``processes`` lives, after release.
 
         For survivors of the test: processes the runner could not end. Call it before
-        :meth:`release`, while no other runner can take the ID. Raises OSError when the
-        block cannot be recorded.
+        :meth:`release`, while no other runner can take the ID. The resources held with
+        the ID stay held as long (``holdings.keep_for``). Raises OSError when the block
+        cannot be recorded.
         """
+        processes = list(processes)
         try:
-            return write_block(self.lock_dir, self.domain_id, processes)
+            path = write_block(self.lock_dir, self.domain_id, processes)
+            if self.holding is not None:
+                holdings.keep_for(self.holding, processes)
         except OSError:
             self.unclean = True
             raise
+        return path
 
     def release(self) -> None:
         """Give the ID back: record first, so ``status`` never names a holder that left.
@@ -185,6 +190,10 @@ class ResourceHold:
         self.holding = holding
         self.waited = 0.0
         self.released = False
+
+    def block_for(self, processes: Iterable[proc.Stat]) -> Path:
+        """Keep the resources held while any of ``processes`` lives (see Reservation's)."""
+        return holdings.keep_for(self.holding, processes)
 
     def release(self) -> None:
         if not self.released:

@@ -24,6 +24,7 @@ from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
     PoolExhaustedError,
     Reservation,
+    ResourceHold,
 )
 from ros_isolated_test.process import reaper, supervisor
 from ros_isolated_test.process.capture import OutputCapture
@@ -562,21 +563,12 @@ def isolation(
     each; processes that were children before the block are not the work's, and stay.
     Either way, what survives keeps the ID blocked, and only then is the ID released.
     The resources ``config`` asks for are held with the ID, and without one when
-    isolation is disabled (a GPU is as scarce either way). Raises PoolExhaustedError or
-    LockDirError when no ID can be had, CapacityConflictError when runners disagree.
+    isolation is disabled (a GPU is as scarce either way); survivors keep them held too.
+    Raises PoolExhaustedError or LockDirError when no ID can be had,
+    CapacityConflictError when runners disagree.
     """
-    if not policy.isolate:
-        if not config.resources:
-            yield None
-            return
-        coordinator = DomainCoordinator(
-            config.lock_dir, config.pool, config.resources, config.capacity
-        )
-        hold = coordinator.hold_resources(command, config.wait_timeout, note)
-        try:
-            yield Held(None, config.resources, hold.waited)
-        finally:
-            hold.release()
+    if not policy.isolate and not config.resources:
+        yield None
         return
     others: frozenset[tuple[int, int]] = frozenset()
     adopted = False
@@ -588,24 +580,34 @@ def isolation(
         coordinator = DomainCoordinator(
             config.lock_dir, config.pool, config.resources, config.capacity
         )
-        with coordinator.reserve(command, config.wait_timeout, note) as reservation:
-            held = Held(reservation.domain_id, config.resources, reservation.waited)
+        taken: Reservation | ResourceHold
+        if policy.isolate:
+            taken = coordinator.acquire(command, config.wait_timeout, note)
+            held = Held(taken.domain_id, config.resources, taken.waited)
+        else:
+            taken = coordinator.hold_resources(command, config.wait_timeout, note)
+            held = Held(None, config.resources, taken.waited)
+        try:
+            yield held
+        finally:
             try:
-                yield held
-            finally:
                 if sweep_grace is not None:
                     # The supervisor's own sweep, as after a test it ran: one way to end a tree.
                     leftovers, held.survivors = supervisor.end_leftovers(sweep_grace, others)
                     for leftover in leftovers:
                         note(leftover_note(leftover))
-                _block_survivors(reservation, held, note)
+                _block_survivors(taken, held, note)
+            finally:
+                taken.release()
     finally:
         if adopted:
             reaper.stop_subreaper()
 
 
-def _block_survivors(reservation: Reservation, held: Held, note: Callable[[str], None]) -> None:
-    """What of the work's tree still lives keeps the ID from every runner until it is gone.
+def _block_survivors(
+    taken: Reservation | ResourceHold, held: Held, note: Callable[[str], None]
+) -> None:
+    """What of the work's tree still lives keeps the ID and the resources until it is gone.
 
     Not ours to kill, or stuck in the kernel. The supervisor's own list when it returned
     (never a process of an embedding program); a scan of our tree only when it did not
@@ -616,18 +618,24 @@ def _block_survivors(reservation: Reservation, held: Held, note: Callable[[str],
         survivors = supervisor.survivors()
     if not survivors:
         return
+    from ros_isolated_test.domain_coordinator.resources import describe
+
     names = ", ".join(survivor.describe() for survivor in survivors)
+    kept = [f"ROS_DOMAIN_ID {held.domain_id}"] if held.domain_id is not None else []
+    kept += [describe(held.resources)] if held.resources else []
+    what = " and ".join(kept)
     try:
-        record = reservation.block_for(survivors)
+        record = taken.block_for(survivors)
     except OSError as error:
         note(
-            f"cannot keep ROS_DOMAIN_ID {held.domain_id} blocked while {names} "
-            f"live: {error}; make the lock directory writable"
+            f"cannot keep {what} blocked while {names} live: {error}; make the lock "
+            "directory writable"
         )
     else:
+        verb = "stays" if len(kept) == 1 else "stay"
         note(
-            f"ROS_DOMAIN_ID {held.domain_id} stays blocked while {names} live "
-            f"({record.name}); see ros-isolated-test status"
+            f"{what} {verb} blocked while {names} live ({record.name}); "
+            "see ros-isolated-test status"
         )
 
 
