@@ -378,35 +378,6 @@ def test_runs_next():
 """
 
 
-def test_a_leftover_daemon_is_ended_before_the_id_is_released(
-    tmp_path: Path,
-    env: dict[str, str],
-    one_id: dict[str, str],
-    started: list[subprocess.Popen[bytes]],
-) -> None:
-    """Order of events on a one-ID pool: the daemon ends, then the next session gets the ID."""
-    events, pid_file, go = tmp_path / "events", tmp_path / "daemon.pid", tmp_path / "go"
-    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file), "GO": str(go)}
-    leaking = project(tmp_path / "leaking", LEAKING_TEST)
-    following = project(tmp_path / "following", NEXT_TEST)
-    first = start_pytest(leaking, shared, tmp_path / "first.log", started)
-    wait_for(pid_file)
-    second = start_pytest(following, shared, tmp_path / "second.log", started)
-    poll_until(
-        lambda: "waiting for a free ROS_DOMAIN_ID" in (tmp_path / "second.log").read_text(),
-        "the second session queued for the pool's one ID",
-    )
-    go.touch()
-    assert first.wait(HUNG) == 0, (tmp_path / "first.log").read_text()
-    assert second.wait(HUNG) == 0, (tmp_path / "second.log").read_text()
-    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
-    assert events.read_text().splitlines() == ["daemon ended", f"next test on {domain}"]
-    daemon = int(pid_file.read_text())
-    log = (tmp_path / "first.log").read_text()
-    assert f"stopped process {daemon}" in log, log
-    assert not Path(f"/proc/{daemon}").exists()
-
-
 #: The next session's test with isolation disabled: notes that it ran (it has no ID).
 NEXT_TEST_WITHOUT_ID = """\
 import os
@@ -417,34 +388,39 @@ def test_runs_next():
 """
 
 
-def test_with_isolation_disabled_a_leftover_daemon_is_ended_before_the_resources_are_released(
-    tmp_path: Path, env: dict[str, str], started: list[subprocess.Popen[bytes]]
+@pytest.mark.parametrize("disabled", [False, True], ids=["id", "isolation-disabled-gpu"])
+def test_a_leftover_daemon_is_ended_before_the_id_or_the_resources_are_released(
+    tmp_path: Path,
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    disabled: bool,
 ) -> None:
-    """The same order when only resources are held: the GPU is free once the tree is gone."""
+    """Order of events: the daemon ends, then the next session gets the pool's one ID, or
+    (isolation disabled) the one GPU both sessions ask for."""
     events, pid_file, go = tmp_path / "events", tmp_path / "daemon.pid", tmp_path / "go"
-    shared = {
-        **env,
-        "DISABLE_ROS_ISOLATION": "1",
-        "ROS_ISOLATED_TEST_CAPACITY": "gpu=1",
-        "EVENTS": str(events),
-        "PID_FILE": str(pid_file),
-        "GO": str(go),
-    }
+    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file), "GO": str(go)}
+    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
     leaking = project(tmp_path / "leaking", LEAKING_TEST)
-    following = project(tmp_path / "following", NEXT_TEST_WITHOUT_ID)
-    for root in (leaking, following):
-        (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = gpu=1\n")
+    if disabled:
+        shared.update(DISABLE_ROS_ISOLATION="1", ROS_ISOLATED_TEST_CAPACITY="gpu=1")
+        following = project(tmp_path / "following", NEXT_TEST_WITHOUT_ID)
+        for root in (leaking, following):
+            (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = gpu=1\n")
+        waiting, next_event = "waiting for gpu=1", "next test"
+    else:
+        following = project(tmp_path / "following", NEXT_TEST)
+        waiting, next_event = "waiting for a free ROS_DOMAIN_ID", f"next test on {domain}"
     first = start_pytest(leaking, shared, tmp_path / "first.log", started)
     wait_for(pid_file)
     second = start_pytest(following, shared, tmp_path / "second.log", started)
     poll_until(
-        lambda: "waiting for gpu=1" in (tmp_path / "second.log").read_text(),
-        "the second session queued for the one GPU",
+        lambda: waiting in (tmp_path / "second.log").read_text(),
+        f"the second session queued: {waiting}",
     )
     go.touch()
     assert first.wait(HUNG) == 0, (tmp_path / "first.log").read_text()
     assert second.wait(HUNG) == 0, (tmp_path / "second.log").read_text()
-    assert events.read_text().splitlines() == ["daemon ended", "next test"]
+    assert events.read_text().splitlines() == ["daemon ended", next_event]
     daemon = int(pid_file.read_text())
     log = (tmp_path / "first.log").read_text()
     assert f"stopped process {daemon}" in log, log
