@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from helpers.commands import run_cli
 from helpers.domains import free_ids
-from helpers.processes import poll_until
+from helpers.processes import poll_until, stat_of
 
 from ros_isolated_test.domain_coordinator import holdings
 from ros_isolated_test.domain_coordinator.holdings import (
@@ -325,12 +325,6 @@ def survivor() -> Iterator[subprocess.Popen[bytes]]:
     process.wait()
 
 
-def _stat(pid: int) -> proc.Stat:
-    found = proc.read_stat(pid)
-    assert found is not None
-    return found
-
-
 @pytest.mark.parametrize("with_id", [True, False], ids=["with-an-id", "isolation-disabled"])
 def test_resources_stay_held_while_a_survivor_lives_and_come_free_after(
     lock_dir: Path, env: dict[str, str], survivor: subprocess.Popen[bytes], with_id: bool
@@ -339,7 +333,7 @@ def test_resources_stay_held_while_a_survivor_lives_and_come_free_after(
     ids = free_ids(2)
     first = DomainCoordinator(lock_dir, ids[:1], {"gpu": 1}, {"gpu": 1})
     taken = first.acquire(["first"]) if with_id else first.hold_resources(["first"])
-    record = taken.block_for([_stat(survivor.pid)])
+    record = taken.block_for([stat_of(survivor.pid)])
     taken.release()
     # The runner let go; the survivor keeps the GPU, and status names it.
     [kept] = holdings.holds(lock_dir)
@@ -369,12 +363,12 @@ def test_a_kept_hold_of_a_recycled_pid_another_boot_or_a_planted_file_holds_noth
 ) -> None:
     coordinator = DomainCoordinator(lock_dir, free_ids(1), {"gpu": 1}, {"gpu": 1})
     hold = coordinator.hold_resources(["first"])
-    path = hold.block_for([_stat(survivor.pid)])
+    path = hold.block_for([stat_of(survivor.pid)])
     hold.release()
     text = path.read_text()
     # Control: as written, it holds the GPU.
     assert [item.survivors for item in holdings.holds(lock_dir)] == [(survivor.pid,)]
-    start = _stat(survivor.pid).start
+    start = stat_of(survivor.pid).start
     for changed in (
         text.replace(f"[{survivor.pid}, {start}]", f"[{survivor.pid}, {start + 1}]"),  # recycled
         text.replace(proc.boot_id(), "another-boot"),

@@ -15,6 +15,7 @@ import pytest
 from helpers import capabilities
 from helpers.commands import CLI, HUNG, ament, run_cli, run_runner
 from helpers.domains import free_ids
+from helpers.processes import stat_of
 from helpers.results import load_result
 from helpers.tiny_disk import fill, run_on_tiny_disk
 
@@ -491,7 +492,6 @@ def test_survivors_keep_the_resources_held_with_the_id_and_say_so(
 ) -> None:
     """A survivor of the work keeps the ID and the GPU: the note names both, status shows it."""
     from ros_isolated_test.domain_coordinator import holdings
-    from ros_isolated_test.process import proc
     from ros_isolated_test.runner import environment, session, settings
 
     ids = free_ids(1)
@@ -508,8 +508,7 @@ def test_survivors_keep_the_resources_held_with_the_id_and_say_so(
     try:
         with session.isolation(policy, config, ["work"], notes.append) as held:
             assert held is not None and held.resources == {"gpu": 1}
-            stat = proc.read_stat(survivor.pid)
-            assert stat is not None
+            stat = stat_of(survivor.pid)
             held.survivors = [stat]
         what = "gpu=1 stays" if disabled else f"ROS_DOMAIN_ID {ids[0]} and gpu=1 stay"
         assert any(

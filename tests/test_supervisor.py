@@ -28,6 +28,7 @@ import pytest
 from helpers import capabilities
 from helpers.commands import HUNG, ament, run_cli
 from helpers.domains import free_ids
+from helpers.processes import stat_of
 from helpers.results import load_result
 
 from ros_isolated_test.domain_coordinator import holder
@@ -278,12 +279,6 @@ def sleeper(tags: Callable[[], str]) -> Iterator[subprocess.Popen[bytes]]:
     process.wait(HUNG)
 
 
-def _stat(pid: int) -> proc.Stat:
-    found = proc.read_stat(pid)
-    assert found is not None
-    return found
-
-
 def test_a_block_record_keeps_the_id_while_its_process_lives(
     lock_dir: Path, sleeper: subprocess.Popen[bytes]
 ) -> None:
@@ -291,7 +286,7 @@ def test_a_block_record_keeps_the_id_while_its_process_lives(
     coordinator = DomainCoordinator(lock_dir, [domain_id])
     reservation = coordinator.try_reserve(["first"])
     assert reservation is not None
-    record = reservation.block_for([_stat(sleeper.pid)])
+    record = reservation.block_for([stat_of(sleeper.pid)])
     reservation.release()
     assert record.stat().st_mode & 0o777 == 0o644
     assert coordinator.try_reserve(["second"]) is None
@@ -312,7 +307,7 @@ def test_a_block_record_keeps_the_id_while_its_process_lives(
 def test_a_recycled_pid_does_not_block(lock_dir: Path, sleeper: subprocess.Popen[bytes]) -> None:
     """Same PID, another start time: another process, the block is stale."""
     (domain_id,) = free_ids(1)
-    real = _stat(sleeper.pid)
+    real = stat_of(sleeper.pid)
     other = proc.Stat(real.pid, real.ppid, real.pgid, real.state, real.name, real.start + 1)
     write_block(lock_dir, domain_id, [other])
     assert blocking_survivors(lock_dir, domain_id) == []
@@ -324,13 +319,13 @@ def test_records_of_another_boot_are_stale_and_of_another_namespace_not_ours_to_
     lock_dir: Path, sleeper: subprocess.Popen[bytes]
 ) -> None:
     (domain_id,) = free_ids(1)
-    record = write_block(lock_dir, domain_id, [_stat(sleeper.pid)])
+    record = write_block(lock_dir, domain_id, [stat_of(sleeper.pid)])
     text = record.read_text()
     assert blocking_survivors(lock_dir, domain_id) != []  # the control: as written, it blocks
     record.write_text(text.replace(f"boot {proc.boot_id()}", "boot another-boot"))
     assert blocking_survivors(lock_dir, domain_id, clean=True) == []
     assert not record.exists(), "a record of another boot is removed"
-    record = write_block(lock_dir, domain_id, [_stat(sleeper.pid)])
+    record = write_block(lock_dir, domain_id, [stat_of(sleeper.pid)])
     record.write_text(record.read_text().replace(proc.pid_namespace(), "pid:[1]"))
     assert blocking_survivors(lock_dir, domain_id, clean=True) == []
     assert record.exists(), "a record of another PID namespace is kept for its own runners"
@@ -348,7 +343,7 @@ def test_planted_block_files_are_never_followed(
     planted = lock_dir / f"domain-{domain_id}.uid{os.getuid()}.planted.blocked"
     planted.symlink_to(target)
     assert blocking_survivors(lock_dir, domain_id, clean=True) == []
-    record = write_block(lock_dir, domain_id, [_stat(sleeper.pid)])
+    record = write_block(lock_dir, domain_id, [stat_of(sleeper.pid)])
     assert target.read_text() == "untouched"
     assert [item.pid for item in blocking_survivors(lock_dir, domain_id)] == [sleeper.pid]
     assert holder.owned_file(record)

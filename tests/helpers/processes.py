@@ -17,6 +17,8 @@ from typing import TypedDict
 
 import pytest
 
+from ros_isolated_test.process import proc
+
 #: Only stops a hung test: how long to wait for a child that should answer at once.
 DEADLINE = 60.0
 
@@ -85,6 +87,13 @@ def wait_for(path: Path, timeout: float = DEADLINE) -> None:
         if time.monotonic() > deadline:
             pytest.fail(f"{path} did not appear within {timeout} s")
         time.sleep(0.02)
+
+
+def stat_of(pid: int) -> proc.Stat:
+    """A live process as survivors are named (PID and start time): it must be running."""
+    found = proc.read_stat(pid)
+    assert found is not None, f"process {pid} is gone"
+    return found
 
 
 def poll_until(condition: Callable[[], bool], what: str, timeout: float = DEADLINE) -> None:
