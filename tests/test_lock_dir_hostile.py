@@ -514,6 +514,7 @@ def test_a_lock_dir_of_another_user_mode_0755_is_refused_for_a_non_root_runner(
     line = error_line(result)
     assert str(shared_lock_dir) in line
     assert f"chmod 1777 {shared_lock_dir}" in line
+    assert "read-only" not in line
     assert LOCK_DIR_ENV in line
     assert str(shared_lock_dir) in result_error(result_file)
     assert list(shared_lock_dir.iterdir()) == []
@@ -570,26 +571,55 @@ def in_namespace(
     return result
 
 
-def test_a_read_only_lock_dir_is_refused_even_for_root(
-    mount_point: Path, env: dict[str, str], tmp_path: Path
+READ_ONLY_CASES = [
+    pytest.param(True, True, id="read-only-lock-dir-exists"),
+    pytest.param(True, False, id="read-only-lock-dir-missing"),
+    pytest.param(False, True, id="control-writable-lock-dir-exists"),
+    pytest.param(False, False, id="control-writable-lock-dir-missing"),
+]
+
+
+@pytest.mark.parametrize(("read_only", "lock_dir_exists"), READ_ONLY_CASES)
+def test_a_read_only_lock_dir_names_the_read_only_file_system_not_chmod(
+    read_only: bool,
+    lock_dir_exists: bool,
+    mount_point: Path,
+    env: dict[str, str],
+    tmp_path: Path,
 ) -> None:
-    """Root bypasses permissions, not a read-only mount: the no-permission case for root."""
+    """Root bypasses permissions, not a read-only mount, and no chmod can fix one.
+
+    The directory is already mode 1777, so advice to chmod it is wrong; the only fix is
+    another directory. The control is the same bind mount left writable: the run works.
+    """
     (first,) = pick_ids(1)
-    os.chown(mount_point, NOBODY, NOBODY)
-    os.chmod(mount_point, 0o755)
+    os.chmod(mount_point, 0o1777)
+    lock_dir = mount_point if lock_dir_exists else mount_point / "locks"
     result_file = tmp_path / "result.xml"
+    marker = tmp_path / "ran"
     where = shlex.quote(str(mount_point))
+    setup = f"mount --bind {where} {where}"
+    if read_only:
+        setup += f"; mount -o remount,bind,ro {where}"
 
     result = in_namespace(
-        f"mount --bind {where} {where}; mount -o remount,bind,ro {where}",
-        ["run", "--junit-xml", str(result_file), "--", "true"],
-        shared_env(env, mount_point, first),
+        setup,
+        ["run", "--junit-xml", str(result_file), "--", "sh", "-c", f"{PRINT_ID}; touch {marker}"],
+        shared_env(env, lock_dir, first),
     )
 
+    if not read_only:
+        assert granted_id(result) == first
+        assert marker.exists()
+        return
     line = error_line(result)
-    assert str(mount_point) in line
+    assert str(lock_dir) in line
+    assert "read-only file system" in line
+    assert "chmod" not in line
+    assert "mode 1777" not in line
     assert LOCK_DIR_ENV in line
-    assert str(mount_point) in result_error(result_file)
+    assert str(lock_dir) in result_error(result_file)
+    assert not marker.exists()
     assert list(mount_point.iterdir()) == []
 
 

@@ -14,12 +14,15 @@ from pathlib import Path
 import pytest
 from helpers import capabilities
 from helpers.commands import HUNG, run_cli, start_cli
-from helpers.processes import poll_until
+from helpers.domains import free_ids
+from helpers.processes import poll_until, user_keywords
+from helpers.survivors import alive_with, build_setuid_helper, tagged
 
 from ros_isolated_test.domain_coordinator.queue import Queue
 
 #: A user ID nobody has here.
 UNNAMED = 4242
+NOBODY = 65534
 
 
 def _rows(env: dict[str, str]) -> list[dict[str, object]]:
@@ -125,3 +128,81 @@ def test_status_shows_the_gazebo_partition_a_held_run_gave_its_test(
     assert "GZ_PARTITION" in table.splitlines()[0], table
     (line,) = [line for line in table.splitlines() if f" {holder.pid} " in line]
     assert f" {name} " in line, table
+
+
+def _lines_naming(text: str, pid: int) -> list[list[str]]:
+    """The ``status`` table rows (split in words) whose PID column is ``pid``."""
+    return [line.split() for line in text.splitlines() if line.split()[2:3] == [str(pid)]]
+
+
+@capabilities.SETUID_HELPER
+def test_a_survivor_is_listed_once_as_a_survivor_and_a_plain_squatter_as_a_squatter(
+    traversable_dir: Path, env: dict[str, str], started: list[subprocess.Popen[bytes]]
+) -> None:
+    """A survivor still has the ID in ROS_DOMAIN_ID, so the squatter scan found it as well:
+    ``status``, the waiting line and the refusal named the same PID as squatter and as
+    survivor. The control, beside it on the same ID: a plain process with ROS_DOMAIN_ID
+    set (never a test) is still a squatter."""
+    helper = build_setuid_helper(traversable_dir)
+    locks = traversable_dir / "locks"
+    locks.mkdir()
+    os.chmod(locks, 0o1777)
+    (domain_id,) = free_ids(1)
+    runner_env = {
+        **env,
+        "ROS_ISOLATED_TEST_LOCK_DIR": str(locks),
+        "ROS_ISOLATED_TEST_DOMAINS": str(domain_id),
+        "HOME": "/nonexistent",
+        "USER": "nobody",
+    }
+    with tagged() as tag:
+        # A runner run as nobody cannot end its test's setuid-root child: a real survivor,
+        # which keeps the ROS_DOMAIN_ID its runner gave it.
+        done = run_cli(
+            ["run", "--kill-grace", "0.5", "--", str(helper), tag],
+            runner_env,
+            **user_keywords(NOBODY),
+        )
+        assert done.returncode == 0, done.stdout + done.stderr
+        (survivor,) = alive_with(tag)
+        assert f"stays blocked while {survivor} (setuid_helper)" in done.stdout, done.stdout
+        environ = Path(f"/proc/{survivor}/environ").read_bytes().split(b"\0")
+        assert f"ROS_DOMAIN_ID={domain_id}".encode() in environ
+        squatter = subprocess.Popen(
+            ["sleep", tag], env={"ROS_DOMAIN_ID": str(domain_id)}, cwd=traversable_dir
+        )
+        started.append(squatter)
+
+        rows = [row for row in _rows(runner_env) if row["domain_id"] == domain_id]
+        survivor_rows = [row["via"] for row in rows if row.get("pid") == survivor]
+        squatter_rows = [row["via"] for row in rows if row.get("pid") == squatter.pid]
+        assert (survivor_rows, squatter_rows) == (["survivor"], ["environment"]), rows
+
+        table = run_cli(["status"], runner_env).stdout
+        assert [words[:2] for words in _lines_naming(table, survivor)] == [
+            [str(domain_id), "survivor"]
+        ], table
+        assert [words[:2] for words in _lines_naming(table, squatter.pid)] == [
+            [str(domain_id), "squatter"]
+        ], table
+
+        # The waiting line and the refusal name who holds the pool: each process once.
+        waiter = start_cli(
+            ["run", "--wait-timeout", "120", "--", "true"],
+            runner_env,
+            traversable_dir / "waiter.log",
+            started,
+        )
+        log = traversable_dir / "waiter.log"
+        poll_until(lambda: "waiting for a free ROS_DOMAIN_ID" in log.read_text(), "no waiting")
+        refused = run_cli(["run", "--wait-timeout", "0", "--", "true"], runner_env)
+        assert refused.returncode == 3, refused.stdout + refused.stderr
+        (waiting,) = [line for line in log.read_text().splitlines() if "waiting for" in line]
+        for said in (waiting, refused.stdout + refused.stderr):
+            assert said.count(f"pid {survivor} ") == 1, said
+            assert f"{domain_id}: survivor pid {survivor} (root)" in said, said
+            assert f"{domain_id}: squatter pid {squatter.pid} " in said, said
+    # Once the survivor is gone, the waiter gets the ID (a clean release: squatters of it
+    # do not block it).
+    assert waiter.wait(HUNG) == 0, log.read_text()
+    assert f"Running with ROS_DOMAIN_ID {domain_id}" in log.read_text()

@@ -10,14 +10,10 @@ carries the tag, whatever went wrong.
 
 from __future__ import annotations
 
-import contextlib
 import io
 import json
 import os
-import secrets
 import shutil
-import signal
-import stat
 import subprocess
 import sys
 import time
@@ -25,11 +21,11 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from helpers import capabilities
 from helpers.commands import HUNG, ament, run_cli
 from helpers.domains import free_ids
 from helpers.processes import stat_of
 from helpers.results import load_result
+from helpers.survivors import alive_with, build_setuid_helper, kill_all_with, new_tag
 
 from ros_isolated_test.domain_coordinator import holder
 from ros_isolated_test.domain_coordinator.block import (
@@ -88,65 +84,6 @@ while True:
     time.sleep(0.05)
 """
 
-#: A setuid-root helper: the test's main process returns once its child has become
-#: root for real (real, effective and saved UID 0), so the runner's user may not
-#: signal it (EPERM). argv[1]: the tag, only to find it.
-SETUID_HELPER = r"""
-#define _GNU_SOURCE
-#include <signal.h>
-#include <unistd.h>
-int main(int argc, char **argv) {
-    int ready[2];
-    char byte;
-    (void)argc; (void)argv;
-    if (pipe(ready) != 0) return 2;
-    pid_t child = fork();
-    if (child < 0) return 2;
-    if (child > 0) {
-        close(ready[1]);
-        return read(ready[0], &byte, 1) == 1 ? 0 : 3;
-    }
-    close(ready[0]);
-    if (setresuid(0, 0, 0) != 0) return 4;
-    if (write(ready[1], "x", 1) != 1) return 5;
-    close(ready[1]);
-    for (;;) pause();
-}
-"""
-
-
-def _alive_with(tag: str) -> list[int]:
-    """Every running (not zombie) process on the machine with ``tag`` in its command line."""
-    found: list[int] = []
-    me = os.getpid()
-    for name in os.listdir("/proc"):
-        if not name.isdigit() or int(name) == me:
-            continue
-        try:
-            with open(f"/proc/{name}/cmdline", "rb") as handle:
-                command = handle.read()
-            with open(f"/proc/{name}/stat", "rb") as handle:
-                state = handle.read().rsplit(b")", 1)[1].split()[0]
-        except (OSError, IndexError):
-            continue
-        if tag.encode() in command.split(b"\0") and state not in (b"Z", b"X"):
-            found.append(int(name))
-    return found
-
-
-def _kill_all_with(tag: str) -> None:
-    """SIGKILL every process carrying ``tag`` until none is left (teardown, whatever happened)."""
-    deadline = time.monotonic() + DEADLINE
-    while pids := _alive_with(tag):
-        for pid in pids:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
-            with contextlib.suppress(ChildProcessError):
-                os.waitpid(pid, os.WNOHANG)  # ours when this process is a subreaper
-        if time.monotonic() > deadline:
-            pytest.fail(f"processes tagged {tag} would not die: {pids}")
-        time.sleep(0.02)
-
 
 @pytest.fixture
 def tags() -> Iterator[Callable[[], str]]:
@@ -154,12 +91,12 @@ def tags() -> Iterator[Callable[[], str]]:
     made: list[str] = []
 
     def new() -> str:
-        made.append(f"9999.{secrets.randbelow(10**12):012d}")
+        made.append(new_tag())
         return made[-1]
 
     yield new
     for tag in made:
-        _kill_all_with(tag)
+        kill_all_with(tag)
 
 
 # -- the red team's case: a daemon that ignores SIGTERM and forks through env -i ---------------
@@ -187,7 +124,7 @@ def test_a_forking_daemon_that_ignores_sigterm_leaves_nothing_behind(
         one_id,
         cwd=tmp_path,
     )
-    survivors = _alive_with(tag)
+    survivors = alive_with(tag)
     assert done.returncode == 0, done.stdout + done.stderr
     assert survivors == [], f"still alive after the runner exited: {survivors}\n{done.stdout}"
     assert "stopped process" in done.stdout
@@ -207,7 +144,7 @@ def test_a_forking_daemon_leaves_nothing_behind_the_ctest_runner(
     done = ament(
         runner_script, result, command, one_id, "--generate-result-on-success", cwd=tmp_path
     )
-    survivors = _alive_with(tag)
+    survivors = alive_with(tag)
     assert done.returncode == 0, done.stdout + done.stderr
     assert survivors == [], f"still alive after the runner exited: {survivors}\n{done.stdout}"
     assert "stopped process" in done.stdout
@@ -235,7 +172,7 @@ def test_a_daemon_gets_sigterm_and_its_grace_before_any_sigkill(
     done = run_cli(["run", "--kill-grace", grace, "--", *command], one_id, cwd=tmp_path)
     took = time.monotonic() - started
     assert done.returncode == 0, done.stdout + done.stderr
-    assert _alive_with(tag) == []
+    assert alive_with(tag) == []
     log = events.read_text().split("\n")
     pid = int(log[0].split()[1])
     assert f"stopped process {pid} (python" in done.stdout
@@ -262,7 +199,7 @@ def test_processes_started_before_the_test_are_not_the_tests(tags: Callable[[], 
         assert [name.endswith("(sleep)") for name in outcome.leftovers] == [True]
         assert str(own.pid) not in outcome.leftovers[0]
         assert own.poll() is None, "the embedding program's own child was signalled"
-        assert _alive_with(tag) == [own.pid]
+        assert alive_with(tag) == [own.pid]
     finally:
         own.kill()
         own.wait(HUNG)
@@ -355,14 +292,7 @@ def test_planted_block_files_are_never_followed(
 @pytest.fixture
 def survivor_setup(traversable_dir: Path, env: dict[str, str]) -> tuple[Path, Path, dict[str, str]]:
     """A setuid-root helper, a lock directory nobody can use, and the environment for it."""
-    capabilities.require(capabilities.OTHER_USERS, capabilities.SETUID_HELPER)
-    source = traversable_dir / "setuid_helper.c"
-    source.write_text(SETUID_HELPER)
-    helper = traversable_dir / "setuid_helper"
-    subprocess.run(["gcc", "-O", "-o", str(helper), str(source)], check=True, timeout=HUNG)
-    os.chown(helper, 0, 0)
-    os.chmod(helper, 0o4755)
-    assert helper.stat().st_mode & stat.S_ISUID
+    helper = build_setuid_helper(traversable_dir)
     locks = traversable_dir / "locks"
     locks.mkdir()
     os.chmod(locks, 0o1777)
@@ -395,7 +325,7 @@ def test_a_process_the_runner_cannot_end_keeps_the_id_blocked(
         **as_nobody,
     )
     assert done.returncode == 0, done.stdout + done.stderr
-    (survivor,) = _alive_with(tag)
+    (survivor,) = alive_with(tag)
     # Root for real: the runner's user may not signal it. No ROS_DOMAIN_ID to see.
     assert os.stat(f"/proc/{survivor}").st_uid == 0
     assert b"ROS_DOMAIN_ID" not in Path(f"/proc/{survivor}/environ").read_bytes()
@@ -423,7 +353,7 @@ def test_a_process_the_runner_cannot_end_keeps_the_id_blocked(
     ), text.stdout
 
     # The control: once the survivor is gone, the ID is handed out again.
-    _kill_all_with(tag)
+    kill_all_with(tag)
     again = run_cli(["run", "--wait-timeout", "0", "--", "true"], runner_env, cwd=traversable_dir)
     assert again.returncode == 0, again.stdout + again.stderr
     assert f"Running with ROS_DOMAIN_ID {domain_id}" in again.stdout

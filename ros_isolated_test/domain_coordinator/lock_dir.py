@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import stat
 from collections.abc import Mapping
@@ -46,6 +47,8 @@ def _create_shared(path: Path) -> None:
     try:
         staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     except OSError as error:
+        if error.errno == errno.EROFS:
+            raise LockDirError(_read_only_message(path, "cannot create lock directory")) from None
         raise LockDirError(
             f"cannot create lock directory {path}: {error.strerror}; "
             f"create it (mode 1777) or point {LOCK_DIR_ENV} at a writable directory"
@@ -57,6 +60,22 @@ def _create_shared(path: Path) -> None:
         # Another runner created it first (or the rename failed): use what is there.
         with contextlib.suppress(OSError):
             os.rmdir(staging)
+
+
+def _on_read_only_mount(path: Path) -> bool:
+    """True when ``path`` sits on a mount that is read-only (for root too)."""
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+def _read_only_message(path: Path, what: str) -> str:
+    """No mode can make a read-only mount writable: only another directory helps."""
+    return (
+        f"{what} {path}: it is on a read-only file system; point {LOCK_DIR_ENV} at a "
+        "directory on a writable file system (shared by every runner that must not collide)"
+    )
 
 
 def ensure_lock_dir(path: Path) -> Path:
@@ -73,6 +92,8 @@ def ensure_lock_dir(path: Path) -> Path:
             f"remove it or point {LOCK_DIR_ENV} at a directory"
         )
     if not os.access(path, os.W_OK | os.X_OK):
+        if _on_read_only_mount(path):
+            raise LockDirError(_read_only_message(path, "cannot use lock directory"))
         raise LockDirError(
             f"lock directory {path} is not writable by this user; "
             f"make it mode 1777 (chmod 1777 {path}) or point {LOCK_DIR_ENV} elsewhere"

@@ -59,6 +59,11 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
     held: list[HeldDomain] = []
     found = squatters.scan(candidates)
     bound = participants.bound_domains()
+    # A survivor still carries an ID in its environment: listed once, as a survivor.
+    survivors = {
+        domain_id: _unique(blocking_survivors(lock_dir, domain_id)) for domain_id in candidates
+    }
+    named = {survivor.pid for found_here in survivors.values() for survivor in found_here}
     for domain_id in sorted(candidates):
         holders: set[int] = set()
         if probe_lock(lock_dir, domain_id):
@@ -70,6 +75,8 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
         elif domain_id in bound:  # a holder's own test is a participant too: not listed
             held.append(HeldDomain(domain_id, "participant", None, tuple(bound[domain_id])))
         for squatter in found.get(domain_id, ()):
+            if squatter.pid in named:
+                continue  # a survivor, listed below
             if holders & squatters.ancestors(squatter.pid):
                 continue  # the holder's own test, not a squatter
             held.append(
@@ -86,9 +93,14 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                     ),
                 )
             )
-        for survivor in blocking_survivors(lock_dir, domain_id):
+        for survivor in survivors[domain_id]:
             held.append(HeldDomain(domain_id, "survivor", _survivor(domain_id, survivor)))
     return held
+
+
+def _unique(survivors: list[proc.Stat]) -> list[proc.Stat]:
+    """Each process once, though several block records (or users) may name it."""
+    return list({stat.pid: stat for stat in survivors}.values())
 
 
 def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
