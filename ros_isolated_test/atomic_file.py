@@ -7,17 +7,93 @@ its import (``random``, ``shutil``, ...) costs more than every write a run makes
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import stat
 from pathlib import Path
 
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
+#: The null device's number on Linux (1:3), wherever its node lies (a container's /dev).
+_NULL_DEVICE = os.makedev(1, 3)
+_KINDS = (
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISSOCK, "a socket"),
+)
+#: The fix for a path a rename must not replace, as the one-line errors give it.
+SPECIAL_FIX = "name a regular file instead, or /dev/null to discard the result"
 
 
-def write_atomically(path: Path, data: bytes, mode: int = 0o644) -> None:
+class NotReplaceableError(OSError):
+    """``path`` is a device node, FIFO or socket (or a symlink to one): a rename would replace it.
+
+    As root, ``--junit-xml /dev/null`` once replaced the machine's /dev/null.
+    """
+
+    def __init__(self, path: Path, kind: str) -> None:
+        super().__init__(errno.EEXIST, f"it is {kind}, which is never replaced", str(path))
+
+
+def discards(path: Path) -> bool:
+    """Whether ``path`` is the null device (or a symlink to it): what is written there is lost.
+
+    Compared by device number, so a node made with ``mknod c 1 3`` counts too.
+    """
+    try:
+        found = os.stat(path)
+    except (OSError, ValueError):
+        return False
+    return stat.S_ISCHR(found.st_mode) and found.st_rdev == _NULL_DEVICE
+
+
+def special_kind(path: Path) -> str | None:
+    """What ``path`` is when a rename must never replace it (``a FIFO``, ``a symlink to ...``).
+
+    None for nothing there, a regular file, a directory, or a symlink to one of those (or
+    to nothing): the symlink itself is replaced, never what it points to.
+    """
+    try:
+        found = os.lstat(path)
+    except (OSError, ValueError):
+        return None
+    link = stat.S_ISLNK(found.st_mode)
+    if link:
+        try:
+            found = os.stat(path)
+        except (OSError, ValueError):
+            return None
+    for test, kind in _KINDS:
+        if test(found.st_mode):
+            return f"a symlink to {kind}" if link else kind
+    return None
+
+
+def _check(path: Path, replacing: os.stat_result | None) -> None:
+    """Refuse to replace a special file, unless it is ``replacing`` (the same node)."""
+    kind = special_kind(path)
+    if kind is None:
+        return
+    if replacing is not None:
+        with contextlib.suppress(OSError):
+            now = os.lstat(path)
+            if (now.st_dev, now.st_ino) == (replacing.st_dev, replacing.st_ino):
+                return
+    raise NotReplaceableError(path, kind)
+
+
+def write_atomically(
+    path: Path, data: bytes, mode: int = 0o644, replacing: os.stat_result | None = None
+) -> None:
     """Write ``data`` beside ``path`` under a name of this process's own, then rename it in.
 
     The folder is created if missing. ``mode`` is set explicitly, whatever the umask.
+    A device node, FIFO or socket at ``path`` (or a symlink to one) is never replaced:
+    :class:`NotReplaceableError`, checked before the temporary file is made and again
+    just before the rename, so one that appeared meanwhile is kept too. ``replacing``:
+    the one such node (its ``lstat``) that may go, the test's own, kept elsewhere.
     """
+    _check(path, replacing)
     path.parent.mkdir(parents=True, exist_ok=True)
     for _attempt in range(100):
         # Unpredictable: in the shared lock directory, other users could plant the name.
@@ -33,6 +109,7 @@ def write_atomically(path: Path, data: bytes, mode: int = 0o644) -> None:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             os.fchmod(handle.fileno(), mode)
+        _check(path, replacing)
         os.replace(temp, path)
     except BaseException:
         with contextlib.suppress(OSError):

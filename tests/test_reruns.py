@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 from helpers import capabilities, jenkins_junit10
-from helpers.commands import ament, run_cli, run_runner, start_cli
+from helpers.commands import ament, ament_args, run_cli, run_runner, start_cli, start_runner
 from helpers.domains import free_ids
 from helpers.processes import Children, poll_until, wait_for
 from lxml import etree
@@ -632,3 +632,110 @@ def test_an_attempts_file_that_cannot_be_kept_is_one_line_naming_the_fix(
     assert blocked.next_attempt(1, {}, lambda latest: latest)
     (line,) = capsys.readouterr().err.splitlines()
     assert "t.xml.attempt1.orig" in line and "remove what is in the way" in line, line
+
+
+#: A test writing its own result file (argv: that file, a state folder, where to stop):
+#: attempt 1 fails, attempt 2 passes. Where the third argument says, it touches
+#: ``stopped`` and stops for good, reading a FIFO no one writes to until the test does.
+STOPS_WHERE_TOLD = """
+own=$1 state=$2 point=$3
+n=$(( $(cat "$state/count" 2>/dev/null || echo 0) + 1 )); echo "$n" > "$state/count"
+stop() { if [ "$point" = "$1" ]; then : > "$state/stopped"; read _ < "$state/fifo"; fi; }
+stop "attempt $n"
+if [ "$n" = 1 ]; then
+  printf '%s' '<testsuite name="s" tests="1"><testcase classname="s" name="c">' \
+    '<failure message="attempt 1 failed"/></testcase></testsuite>' > "$own"
+  exit 1
+fi
+stop "attempt $n before its file"
+printf '%s' '<testsuite name="s" tests="1"><testcase classname="s" name="c"/></testsuite>' > "$own"
+stop "attempt $n after its file"
+exit 0
+"""
+KILL_POINTS = [
+    "waiting for an ID",
+    "attempt 1",
+    "between attempts",
+    "attempt 2 before its file",
+    "attempt 2 after its file",
+]
+
+
+@pytest.mark.parametrize("point", KILL_POINTS)
+def test_a_runner_killed_at_any_point_of_a_rerun_leaves_a_failing_result(
+    runner_script: str,
+    one_id: dict[str, str],
+    lock_dir: Path,
+    tmp_path: Path,
+    children: Children,
+    started: list[subprocess.Popen[bytes]],
+    point: str,
+) -> None:
+    """SIGKILL to the RUNNER's whole process group, as ctest's TIMEOUT does, wherever it is.
+
+    The test knows where the runner is without a clock: the test command stops where it
+    is told, the first wait is for the pool's one ID held here, and between attempts the
+    rerun waits behind a holder that queued while attempt 1 ran.
+    """
+    (domain_id,) = map(int, one_id["ROS_ISOLATED_TEST_DOMAINS"].split(","))
+    state = tmp_path / "state"
+    state.mkdir()
+    os.mkfifo(state / "fifo")
+    result = tmp_path / "pkg" / "t.xml"
+    log = tmp_path / "log"
+    stop_at = "attempt 1" if point == "between attempts" else point
+    command = ["sh", "-c", STOPS_WHERE_TOLD, "t", str(result), str(state), stop_at]
+    args = ament_args(result, command, "--env", "ROS_ISOLATED_TEST_RERUNS=1")
+    with contextlib.ExitStack() as stack:
+        if point == "waiting for an ID":
+            stack.enter_context(DomainCoordinator(lock_dir, [domain_id]).reserve(["holder"]))
+        runner = start_runner(runner_script, args, one_id, log, started, start_new_session=True)
+        if point == "waiting for an ID":
+            poll_until(lambda: bool(Queue(lock_dir).waiters()), "the runner queued")
+        else:
+            wait_for(state / "stopped")
+        if point == "between attempts":
+            holder = children.python(QUEUE_AND_HOLD, lock_dir, domain_id)
+            poll_until(lambda: bool(Queue(lock_dir).waiters()), "the holder queued")
+            with open(state / "fifo", "wb"):
+                pass  # attempt 1 goes on: it fails, and the rerun waits behind the holder
+            assert children.first_line(holder) == "held"
+            poll_until(lambda: "waiting for a free ROS_DOMAIN_ID" in log.read_text(), "the rerun")
+        os.killpg(runner.pid, signal.SIGKILL)
+        assert runner.wait(timeout=120) == -signal.SIGKILL, log.read_text()
+    shown = run_cli(["report", "--json", str(result)], one_id)
+    assert shown.returncode == 1, shown.stdout + shown.stderr + result.read_text()
+    total = json.loads(shown.stdout)["total"]
+    assert total["failures"] + total["errors"] >= 1, total
+    root = _valid(result)
+    text = etree.tostring(root, encoding="unicode")
+    assert "the runner was killed before the test ended" in text, text
+    if point not in ("waiting for an ID", "attempt 1"):
+        assert "attempt 1 failed" in text, text  # the earlier failure, on record
+        assert _properties(result)["attempts"] == "2", text
+    if point == "attempt 2 after its file":
+        # The passing file attempt 2 wrote is kept beside the result, never in its place.
+        assert b'name="c"/>' in result.with_name("t.xml.attempt2.orig").read_bytes()
+
+
+def test_control_a_rerun_of_a_test_writing_its_own_file_that_finishes_merges_its_attempts(
+    runner_script: str, one_id: dict[str, str], tmp_path: Path
+) -> None:
+    """The same test, stopped nowhere: failing then passing is flaky, and report passes it."""
+    state = tmp_path / "state"
+    state.mkdir()
+    result = tmp_path / "pkg" / "t.xml"
+    command = ["sh", "-c", STOPS_WHERE_TOLD, "t", str(result), str(state), "nowhere"]
+    options = ("--env", "ROS_ISOLATED_TEST_RERUNS=1")
+    proc = ament(runner_script, result, command, one_id, *options, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    root = _valid(result)
+    (case,) = root.iter("testcase")
+    (flaky,) = case.findall("flakyFailure")
+    assert flaky.get("message") == "attempt 1 failed", etree.tostring(root)
+    assert case.find("failure") is None and case.find("error") is None
+    assert _properties(result)["attempts"] == "2"
+    # Each attempt's own file is kept, as without the redirection: the last one's as .orig.
+    assert b"attempt 1 failed" in result.with_name("t.xml.attempt1.orig").read_bytes()
+    assert b'name="c"/>' in result.with_name("t.xml.orig").read_bytes()
+    _report_names_it_flaky(result, one_id)

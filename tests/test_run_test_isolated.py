@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import datetime
 import importlib.util
+import os
 import shlex
 import subprocess
 from pathlib import Path
@@ -156,6 +157,36 @@ def test_a_result_path_that_cannot_be_written_leaves_the_error_line(
     assert "Traceback" not in proc.stderr
     assert len(proc.stderr.splitlines()) == 1, proc.stderr
     assert sorted(item.name for item in tmp_path.iterdir()) == ["bin", "t.xml"]
+
+
+@capabilities.BARE_PYTHON
+@pytest.mark.parametrize("kind", ["fifo", "symlink to a fifo", "symlink to /dev/null"])
+def test_a_fifo_or_dev_null_at_the_result_path_is_never_replaced(
+    runner_script: str, lock_dir: Path, tmp_path: Path, kind: str
+) -> None:
+    """Without the package too: the error line only, and the path left as it was.
+
+    The control is the test above: a regular path gets the result saying why.
+    """
+    result = tmp_path / "t.xml"
+    if kind == "symlink to /dev/null":
+        result.symlink_to(os.devnull)
+    elif kind == "fifo":
+        os.mkfifo(result)
+    else:
+        os.mkfifo(tmp_path / "fifo")
+        result.symlink_to(tmp_path / "fifo")
+    before = os.lstat(result)
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    args = [str(result), "--command", "touch", "ran"]
+    proc = _bare_run(_bare_python(), runner_script, args, empty, lock_dir, tmp_path)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert len(proc.stderr.splitlines()) == 1, proc.stderr
+    after = os.lstat(result)
+    assert (after.st_ino, after.st_mode) == (before.st_ino, before.st_mode)
+    names = sorted(item.name for item in tmp_path.iterdir())
+    assert names == sorted(["bin", "t.xml", *(["fifo"] if kind == "symlink to a fifo" else [])])
 
 
 def _imported(python: str, argv: list[str], cwd: Path) -> set[str]:

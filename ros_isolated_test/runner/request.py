@@ -6,6 +6,7 @@ Plain classes rather than dataclasses, as everywhere on a test's path: importing
 
 from __future__ import annotations
 
+import os
 from enum import Enum
 from pathlib import Path
 
@@ -115,6 +116,27 @@ class RunRequest:
         self.settings = settings
         #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
         self.env_origin = env_origin
+
+    def command_writing_to(self, own_result: Path) -> tuple[str, ...]:
+        """The command with the result path it names pointed at ``own_result`` instead.
+
+        An argument names it when it is that path, or ends in it after ``=`` or ``:``
+        (``--junit-xml=PATH``, ``--gtest_output=xml:PATH``, as ament passes it); paths
+        are compared made absolute, so ``./r.xml`` names ``r.xml``.
+        """
+        if self.result_file is None:
+            return self.command
+        wanted = os.path.abspath(self.result_file)
+        command = list(self.command)
+        for index, word in enumerate(command):
+            if not word.endswith(self.result_file.name):
+                continue  # the cheap test first: a test's arguments can be long
+            cuts = [0, *(at + 1 for at, char in enumerate(word) if char in "=:")]
+            for cut in cuts:
+                if word[cut:] and os.path.abspath(word[cut:]) == wanted:
+                    command[index] = f"{word[:cut]}{own_result}"
+                    break
+        return tuple(command)
 
     @property
     def test_name(self) -> str:

@@ -18,6 +18,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
 from ros_isolated_test.domain_coordinator.holdings import CapacityConflictError
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
 from ros_isolated_test.domain_coordinator.reservation import (
@@ -52,13 +53,14 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     try:
         result.prepare()
     except OSError as error:
-        message = (
-            f"cannot use result file {request.result_file}: {error.strerror}; "
-            "choose a writable file path"
-        )
-        _error(console, message)
+        # Nothing reserved, nothing started, and no result file: its path is what is wrong.
+        fix = "choose a writable file path"
+        if isinstance(error, NotReplaceableError):
+            fix = SPECIAL_FIX
+        _error(console, f"cannot use result file {request.result_file}: {error.strerror}; {fix}")
         return exit_codes.USAGE
-    clash = same_file_message(request.output_file, request.result_file)
+    # result.path: None when the result is discarded (/dev/null), which clashes with nothing.
+    clash = same_file_message(request.output_file, result.path)
     if clash is not None:
         return _not_run(result, console, clash, Outcome.ERROR, exit_codes.USAGE)
     if not result.write_placeholder():
@@ -210,8 +212,9 @@ def _guarded(
         result.properties[RERUNS_PROPERTY] = str(config.reruns)
     # What every attempt's result starts from (an attempt adds its ID, its exit, ...).
     base = dict(result.properties)
+    command = _command_of(request, config, result, 1)
     try:
-        outcome, domain_id = _attempt(request, policy, config, result, capture, guard)
+        outcome, domain_id = _attempt(request, command, policy, config, result, capture, guard)
     except (PoolExhaustedError, LockDirError) as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
     except CapacityConflictError as error:
@@ -235,8 +238,24 @@ def _guarded(
     return code
 
 
+def _command_of(
+    request: RunRequest, config: settings.Settings, result: ResultFile, number: int
+) -> tuple[str, ...]:
+    """The command attempt ``number`` runs: in a rerun series, its own result file goes beside.
+
+    The result path it names is pointed at ``result.own_file``, so the result path holds
+    the record so far (earlier failures, this attempt not finished) until the runner
+    merges the attempt in: a kill at any moment leaves a failing file.
+    """
+    if not config.reruns:
+        return request.command
+    own = result.own_file(number)
+    return request.command if own is None else request.command_writing_to(own)
+
+
 def _attempt(
     request: RunRequest,
+    command: tuple[str, ...],
     policy: environment.Policy,
     config: settings.Settings,
     result: ResultFile,
@@ -248,7 +267,7 @@ def _attempt(
     Returns how the test ended and the ID it ran on (None: isolation disabled). Raises
     PoolExhaustedError or LockDirError (no ID), or Interrupted (a signal before it started).
     """
-    with isolation(policy, config, request.command, capture.note) as held:
+    with isolation(policy, config, command, capture.note) as held:
         domain_id = None if held is None else held.domain_id
         if domain_id is not None:
             capture.line(header_line(policy, domain_id))
@@ -261,9 +280,9 @@ def _attempt(
             capture.note(line)
         result.properties.update(properties)
         env = policy.env if domain_id is None else policy.for_domain(domain_id)
-        capture.note(f"invoking in '{os.getcwd()}': {shlex.join(request.command)}")
+        capture.note(f"invoking in '{os.getcwd()}': {shlex.join(command)}")
         outcome = supervisor.run(
-            request.command,
+            command,
             env,
             capture,
             request.timeout,
@@ -342,7 +361,8 @@ def _reruns(
             guard.test_started = guard.concluding = False
             if guard.late is not None:
                 raise Interrupted(guard.late)
-            outcome, domain_id = _attempt(request, policy, config, result, capture, guard)
+            command = _command_of(request, config, result, number)
+            outcome, domain_id = _attempt(request, command, policy, config, result, capture, guard)
         except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
             capture.note(f"attempt {number} did not run: {error}")
             result.properties["rerun_not_run"] = str(error)

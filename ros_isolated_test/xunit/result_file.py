@@ -21,7 +21,13 @@ import sys
 import time
 from pathlib import Path
 
-from ros_isolated_test.atomic_file import write_atomically
+from ros_isolated_test.atomic_file import (
+    SPECIAL_FIX,
+    NotReplaceableError,
+    discards,
+    special_kind,
+    write_atomically,
+)
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import serialise, validate
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
@@ -67,8 +73,14 @@ class ResultFile:
         # From a rerun on (next_attempt): what puts the earlier attempts beside this one's
         # suite, so the file on disk never shows an attempt without the failures before it.
         self._merge: Callable[[Suite], Suite] | None = None
-        # Whether adopt() kept the test's own file aside at ``original``.
+        # Whether adopt() kept the test's own file aside at ``original``; whether it took
+        # it from ``own`` (the result path then holds our placeholder, not the test's file);
+        # the node kept there, the one special file (a FIFO the test left) a write may replace.
         self._adopted = False
+        self._beside = False
+        self._kept: os.stat_result | None = None
+        #: Where the current attempt of a rerun series writes its own file (own_file).
+        self.own: Path | None = None
         # Why the last write failed, in the system's words (No space left on device).
         self._failure = "the write failed"
 
@@ -78,9 +90,21 @@ class ResultFile:
         return None if self.path is None else self.path.with_name(self.path.name + ORIGINAL_SUFFIX)
 
     def prepare(self) -> None:
-        """Drop stale files of an earlier run (colcon never clears them), make the folder."""
+        """Drop stale files of an earlier run (colcon never clears them), make the folder.
+
+        The null device discards the result: nothing is written, as if none was asked
+        for (``pytest --junit-xml=/dev/null`` keeps nothing either). Any other device
+        node, FIFO or socket (or a symlink to one) would be replaced by the first write:
+        :class:`NotReplaceableError`, and nothing is touched.
+        """
         if self.path is None:
             return
+        if discards(self.path):
+            self.path = None
+            return
+        kind = special_kind(self.path)
+        if kind is not None:
+            raise NotReplaceableError(self.path, kind)
         if self.path.is_dir():
             raise IsADirectoryError(errno.EISDIR, "it is a directory", str(self.path))
         for stale in (self.path, self.original):
@@ -99,6 +123,29 @@ class ResultFile:
         assert self.path is not None
         return self.path.with_name(f"{self.path.name}.attempt{number}{ORIGINAL_SUFFIX}")
 
+    def own_file(self, number: int) -> Path | None:
+        """Where attempt ``number`` of a rerun series writes its own file: beside the result path.
+
+        Never the result path itself: there the record so far (the earlier attempts and a
+        case saying this one did not finish) must stay until the runner merges this
+        attempt in, or a kill after a passing attempt wrote its file would leave "passed".
+        None (the result path, as without reruns) when the name cannot be cleared.
+        """
+        self.own = None
+        if self.path is None:
+            return None
+        own = self.attempt_original(number)
+        try:
+            _remove(own)  # the test's own leftover: this name is the runner's
+        except OSError as error:
+            _say(
+                f"cannot clear {own} ({_reason(error)}), so attempt {number} writes its own "
+                f"result file to {self.path} itself; remove what is in the way there"
+            )
+            return None
+        self.own = own
+        return own
+
     def next_attempt(
         self, finished: int, properties: dict[str, str], merge: Callable[[Suite], Suite]
     ) -> bool:
@@ -115,6 +162,7 @@ class ResultFile:
         if self.path is None:
             return True
         assert self.original is not None
+        self._beside, self._kept = False, None
         if self._adopted:
             self._adopted = False
             kept = self.attempt_original(finished)
@@ -222,7 +270,7 @@ class ResultFile:
         if merge is not None:
             suite, checked = merge(suite), True
         try:
-            write_atomically(self.path, validate.render(suite, checked).data)
+            write_atomically(self.path, validate.render(suite, checked).data, replacing=self._kept)
         except OSError as error:
             _say(f"the result file {self.path} does not note a late signal: {_reason(error)}")
             return
@@ -257,7 +305,7 @@ class ResultFile:
     def _write(self, data: bytes) -> bool:
         assert self.path is not None
         try:
-            write_atomically(self.path, data)
+            write_atomically(self.path, data, replacing=self._kept)
         except OSError as error:
             self._failure = _reason(error)
             self.write_error = f"cannot write result file {self.path}: {self._failure}"
@@ -273,7 +321,7 @@ class ResultFile:
         there, is overwritten by the stand-in.
         """
         assert self.path is not None and self.original is not None
-        if self._adopted:
+        if self._adopted and not self._beside:
             if not os.path.lexists(self.path):  # a directory, moved aside whole
                 try:
                     os.replace(self.original, self.path)
@@ -299,6 +347,8 @@ class ResultFile:
         truncation that tidies it up never happens.
         """
         assert self.path is not None and self.placeholder is not None
+        if not stat.S_ISREG(os.lstat(self.path).st_mode):
+            return False  # never opened: opening a device can act on it
         flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
         fd = os.open(self.path, flags)
         try:
@@ -368,6 +418,8 @@ class ResultFile:
         """Whether the test left our placeholder (or nothing) in place."""
         if self.path is None:
             return True
+        if self.own is not None and os.path.lexists(self.own):
+            return False
         if self.placeholder is not None and _holds_exactly(self.path, self.placeholder):
             return True
         return not os.path.lexists(self.path)
@@ -378,21 +430,30 @@ class ResultFile:
         The original is linked (or copied) to ``original`` and stays at the path until
         :meth:`write` renames the canonical file over it: whenever the runner is killed,
         a file is at the path. A directory in its place can only be moved aside whole.
+        A file written to ``own`` (a rerun series) is moved to ``original``: the path
+        holds the record so far meanwhile.
         """
         assert self.path is not None and self.original is not None
-        cases, read = read_cases(self.path, self.request.package, self.request.test_name)
+        beside = self.own is not None and os.path.lexists(self.own)
+        source = self.own if beside and self.own is not None else self.path
+        cases, read = read_cases(source, self.request.package, self.request.test_name)
         self.problems = read.problems + read.repairs
         if read.repairs:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)
-        if os.path.lexists(self.path):
+        if os.path.lexists(source):
             try:
-                _keep_aside(self.path, self.original)
+                if beside:
+                    _remove(self.original)
+                    os.rename(source, self.original)
+                else:
+                    _keep_aside(self.path, self.original)
+                    self._kept = os.lstat(self.original)
             except OSError as error:
                 problem = f"cannot keep the test's own file as {self.original}: {_reason(error)}"
                 self.problems.append(problem)
                 self.properties["original_result_file_error"] = problem
             else:
-                self._adopted = True
+                self._adopted, self._beside = True, beside
                 self.properties["original_result_file"] = self.original.name
         return cases
 
@@ -463,6 +524,8 @@ def _reason(error: OSError) -> str:
 
 def _fix(error: OSError) -> str:
     """The fix a user can make, for the one-line error."""
+    if isinstance(error, NotReplaceableError):
+        return SPECIAL_FIX
     if error.errno in _SPACE_ERRORS:
         return "free space on its file system, or choose a result path on another one"
     return "choose a writable file path"

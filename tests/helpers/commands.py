@@ -149,3 +149,29 @@ def start_cli(
         )
     into.append(process)
     return process
+
+
+def start_runner(
+    runner_script: str,
+    args: Sequence[str],
+    env: Mapping[str, str],
+    log: Path,
+    into: list[subprocess.Popen[bytes]],
+    **popen: object,
+) -> subprocess.Popen[bytes]:
+    """The RUNNER script in the background as ctest starts it, output into ``log``.
+
+    Kept in ``into`` (the ``started`` fixture's list); ``popen`` goes to Popen, e.g.
+    ``start_new_session=True`` for a process group of its own that a test kills whole.
+    """
+    with log.open("wb") as out:
+        process: subprocess.Popen[bytes] = subprocess.Popen(  # type: ignore[call-overload]
+            [sys.executable, "-u", runner_script, *args],
+            env=dict(env),
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=out,
+            **popen,
+        )
+    into.append(process)
+    return process

@@ -8,6 +8,7 @@ can import the package, it still leaves RESULT_FILE saying why, importing nothin
 
 import contextlib
 import os
+import stat  # loaded at start-up by os: free
 import sys
 import time  # built in and loaded at start-up: free
 
@@ -77,11 +78,14 @@ def _write_not_run(argv: "list[str]", message: str) -> None:
     The package that writes result files could not be imported, yet ctest and colcon must
     still find a result saying why the test did not run. Nothing is imported for it:
     whatever made the import fail must not make this fail too. Best effort: a path that
-    cannot be written leaves only the error line.
+    cannot be written leaves only the error line, and so does a device node, FIFO or
+    socket there (or a symlink to one), which is never replaced: /dev/null discards it.
     """
     if not argv or not argv[0] or argv[0].startswith("-"):
         return
     path = argv[0]
+    if _never_replaced(path):
+        return
     words = argv[: argv.index("--command")] if "--command" in argv else argv
     command = argv[len(words) + 1 :]
     package = ""
@@ -106,10 +110,21 @@ def _write_not_run(argv: "list[str]", message: str) -> None:
                 view = view[os.write(fd, view) :]
         finally:
             os.close(fd)
+        if _never_replaced(path):  # again: one may have appeared meanwhile
+            raise FileExistsError(path)
         os.replace(temporary, path)
     except OSError:
         with contextlib.suppress(OSError):
             os.unlink(temporary)
+
+
+def _never_replaced(path: str) -> bool:
+    """Whether ``path`` is a device node, FIFO or socket, or a symlink to one."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return False  # nothing there, or a dangling symlink: the symlink is replaced
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def _not_run_document(
