@@ -17,11 +17,13 @@ from helpers import capabilities, jenkins_junit10
 from lxml import etree
 
 from ros_isolated_test.schemas import junit_schema
-from ros_isolated_test.xunit import serialise, validate
+from ros_isolated_test.xunit import normalise, reader, serialise, validate
 from ros_isolated_test.xunit.attempts import (
     ABSENT,
     ATTEMPT_TEXT_LIMIT,
     ATTEMPTS_KEPT,
+    NOT_RUN_AGAIN,
+    NOT_RUN_AGAIN_TYPE,
     RENAMED_PROPERTY,
     for_outcome,
     kept,
@@ -205,13 +207,16 @@ def test_a_skipped_case_after_a_failure_is_flaky_and_skipped() -> None:
 
 
 def test_a_case_absent_from_the_last_attempt_is_kept_skipped_with_its_failures() -> None:
-    """The runner's own case of a timed-out first attempt, then the test's real cases."""
-    timeout = Case.saying(CLASS, "timeout", Outcome.FAILURE, "The test timed out after 60 s")
+    """The runner's own case of a timed-out first attempt, then the test's real cases.
+
+    As ``ResultFile.case`` makes it: in the suite's own class, named after the test.
+    """
+    timeout = Case.saying("pkg.test", "test", Outcome.FAILURE, "The test timed out after 60 s")
     first = _suite([timeout], system_out="console of the first attempt")
     merged = merge_attempts([first, _suite([_passed("real")])])
     root = _written(merged)
-    assert [node.get("name") for node in root.iter("testcase")] == ["real", "timeout"]
-    node = _case(root, "timeout")
+    assert [node.get("name") for node in root.iter("testcase")] == ["real", "test"]
+    node = _case(root, "test")
     assert _tags(node) == ["skipped", "flakyFailure"]
     expected = ABSENT.format(total=2, seen=1, outcome="failure")
     assert node[0].get("message") == expected
@@ -220,6 +225,65 @@ def test_a_case_absent_from_the_last_attempt_is_kept_skipped_with_its_failures()
     assert node[1].findtext("system-out") == "console of the first attempt"
     assert _counts(root) == ("2", "0", "0", "1")
     assert not merged.failed
+
+
+@pytest.mark.parametrize("outcome", [Outcome.FAILURE, Outcome.ERROR])
+def test_a_test_case_that_failed_and_then_was_not_run_stays_failed(outcome: Outcome) -> None:
+    """Issue 30, item 5: no attempt after its failure ran it, so it never passed."""
+    first = _suite([_failed("a", "boom", outcome), _passed("b")])
+    merged = merge_attempts([first, _suite([_passed("b")])])
+    root = _written(merged)
+    node = _case(root, "a")
+    assert _tags(node) == [outcome.value, f"rerun{outcome.value.title()}"]
+    assert node[0].get("message") == NOT_RUN_AGAIN.format(total=2, seen=1, outcome=outcome.value)
+    assert node[0].get("message", "").startswith("Failed, then not run: ")
+    assert node[0].get("type") == NOT_RUN_AGAIN_TYPE
+    assert node[1].get("message") == "boom"  # the failure itself, kept as the attempt
+    failures, errors = (1, 0) if outcome is Outcome.FAILURE else (0, 1)
+    assert _counts(root) == ("2", str(failures), str(errors), "0")
+    assert merged.failed and validate.render(merged).failed
+    assert not merged.cases[1].flaky
+    assert _properties(root)["flaky_cases"] == "0"
+
+
+def test_control_the_same_case_run_again_and_passing_is_a_flaky_pass() -> None:
+    first = _suite([_failed("a", "boom"), _passed("b")])
+    merged = merge_attempts([first, _suite([_passed("b"), _passed("a")])])
+    assert _tags(_case(_written(merged), "a")) == ["system-out", "flakyFailure"]
+    assert not merged.failed
+
+
+def test_a_case_that_passed_after_failing_and_then_was_not_run_is_skipped() -> None:
+    """Its last run passed: not a failure, and not a pass of the last attempt either."""
+    attempts = [_suite([_failed("a"), _passed("b")]), _suite([_passed("a"), _passed("b")])]
+    merged = merge_attempts([*attempts, _suite([_passed("b")])])
+    node = _case(_written(merged), "a")
+    assert _tags(node) == ["skipped", "flakyFailure"]
+    assert node[0].get("message") == ABSENT.format(total=3, seen=2, outcome="passed")
+    assert not merged.failed
+
+
+def test_the_runners_own_cases_about_an_attempt_are_answered_by_a_later_one(
+    tmp_path: Path,
+) -> None:
+    """The exit, a damaged file, a lost output file: attempt 1's, its ending passed later.
+
+    Made as the runner makes them, in the suite's own class; the same names in a class
+    of the test's own stay failed.
+    """
+    (tmp_path / "test.xml").write_text("this is not xml\n")
+    damaged = normalise.damage_case(reader.read(tmp_path / "test.xml"), "pkg", "test")
+    exit_case = normalise.exit_case("pkg.test", "exited with code 1", all_passed=True)
+    output = Case.saying("pkg.test", "output file", Outcome.ERROR, "No space left on device")
+    own = [damaged, exit_case, output]
+    merged = merge_attempts([_suite([*own, _passed("b")]), _suite([_passed("b")])])
+    root = _written(merged)
+    for name in ("result file", "test process exit", "output file"):
+        assert _tags(_case(root, name))[0] == "skipped", name
+    assert not merged.failed
+    theirs = [Case.saying(CLASS, case.name, case.outcome, case.message) for case in own]
+    again = merge_attempts([_suite([*theirs, _passed("b")]), _suite([_passed("b")])])
+    assert _counts(_written(again)) == ("4", "1", "2", "0")
 
 
 def test_a_passed_case_absent_from_the_last_attempt_is_kept_skipped_without_attempts() -> None:
@@ -647,10 +711,13 @@ def test_random_histories_always_merge_into_valid_files_with_honest_counts() -> 
         attempts = _random_history(rng)
         merged = merge_attempts(attempts)
         root = _written(merged)
-        last = {case.name: case.outcome for case in attempts[-1].cases}
+        # A case the last attempt lacks: failed if it failed when last seen, else skipped.
+        seen = {case.name: case.outcome for suite in attempts for case in suite.cases}
+        seen = {name: value if value.failed else Outcome.SKIPPED for name, value in seen.items()}
+        last = seen | {case.name: case.outcome for case in attempts[-1].cases}
         for node in root.iter("testcase"):
             tags = _tags(node)
-            outcome = last.get(str(node.get("name")), Outcome.SKIPPED)
+            outcome = last[str(node.get("name"))]
             finals = [tag for tag in tags if tag in ("failure", "error", "skipped")]
             assert finals == ([] if outcome is Outcome.PASSED else [outcome.value]), tags
             prefix = "rerun" if outcome.failed else "flaky"

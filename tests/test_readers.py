@@ -138,11 +138,13 @@ ATTEMPT_FAILS = _suite(
     'tests="1" failures="1" errors="0"',
 )
 ATTEMPT_PASSES = _suite("attempt", '<testcase classname="T" name="talks" time="0.1"/>')
+#: A second attempt without the failed case: "failed, then not run" (issue 30, item 5).
+ATTEMPT_LACKS_IT = _suite("attempt", '<testcase classname="T" name="listens" time="0.1"/>')
 #: sh -c: $0 fails.xml $1 passes.xml $2 state file $3 result file.
 FAIL_ONCE = 'if [ -e "$2" ]; then cat "$1" > "$3"; exit 0; fi; touch "$2"; cat "$0" > "$3"; exit 1'
 
 SAMPLE_NAMES = sorted(path.stem for path in SAMPLES.glob("*.xml"))
-RUNS = ("runner_gitlab_collision", "runner_rerun_flaky")
+RUNS = ("runner_gitlab_collision", "runner_rerun_flaky", "runner_rerun_not_run_again")
 NAMES = SAMPLE_NAMES + [f"crafted_{name}" for name in CRAFTED] + list(RUNS)
 
 
@@ -206,10 +208,20 @@ def folder(
         rerun_env,
     )
     (out / flaky.name).write_bytes(flaky.read_bytes())
+    lacks = staging / "lacks.own"
+    lacks.write_text(ATTEMPT_LACKS_IT)
+    gone, gone_code = runner(
+        "runner_rerun_not_run_again",
+        ["sh", "-c", FAIL_ONCE, str(fails), str(lacks), str(staging / "tried"), "RESULT"],
+        staging,
+        runner_script,
+        rerun_env,
+    )
+    (out / gone.name).write_bytes(gone.read_bytes())
     assert sorted(path.stem for path in out.glob("*.xml")) == sorted(NAMES)
     paths = [out / f"{name}.xml" for name in NAMES]
     readings = readers.read_all(paths, tmp_path_factory.mktemp("readers"))
-    codes = {collided.stem: collided_code, flaky.stem: flaky_code}
+    codes = {collided.stem: collided_code, flaky.stem: flaky_code, gone.stem: gone_code}
     return Folder(out, {path.stem: readings[path] for path in paths}, codes)
 
 
@@ -281,6 +293,25 @@ def test_a_case_failing_every_attempt_is_one_failure_to_every_reader(folder: Fol
     )
     for reader, reading in folder.readings["crafted_surefire_flaky"].items():
         assert reading.failing[readers.IDENTITY[reader](key)] == 1, reader
+
+
+def test_a_case_that_failed_and_then_was_not_run_is_a_failure_to_every_reader(
+    folder: Folder,
+) -> None:
+    """Never seen to pass: one failure to each reader, and the RUNNER exits 1."""
+    name = "runner_rerun_not_run_again"
+    assert folder.codes[name] == 1
+    root = etree.parse(str(folder.file(name))).getroot()
+    case = next(node for node in root.iter("testcase") if node.get("name") == "talks")
+    assert [child.tag for child in case][:2] == ["failure", "rerunFailure"]
+    key = readers.CaseKey(
+        str(root.find("testsuite").get("name")),  # type: ignore[union-attr]
+        str(case.get("classname")),
+        "talks",
+    )
+    for reader, reading in folder.readings[name].items():
+        assert reading.failing[readers.IDENTITY[reader](key)] == 1, reader
+        assert reading.counts == (2, 1, 0, 0), reader
 
 
 # --- controls: where the readers disagree on raw files ------------------------------------------

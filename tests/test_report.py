@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from helpers import capabilities
 from helpers.commands import run_cli
+from helpers.processes import user_keywords
 from lxml import etree
 
 from ros_isolated_test.xunit import validate
-from ros_isolated_test.xunit.attempts import merge_attempts
+from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE, merge_attempts
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 SAMPLES = Path(__file__).resolve().parent / "data" / "xunit"
@@ -284,7 +287,14 @@ def test_json_exit_code_is_zero_when_all_passed(tree: Tree, env: dict[str, str])
     proc = run_cli(["report", "--json", str(RESULTS / "talker.xml")], env, cwd=tree.root)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     data = json.loads(proc.stdout)
-    assert data["total"] == {"tests": 1, "errors": 0, "failures": 0, "skipped": 0, "flaky": 0}
+    assert data["total"] == {
+        "tests": 1,
+        "errors": 0,
+        "failures": 0,
+        "skipped": 0,
+        "flaky": 0,
+        "failed_then_not_run": 0,
+    }
     assert data["files"][0]["failed_cases"] == []
     assert data["files"][0]["flaky_cases"] == []
 
@@ -361,7 +371,14 @@ def test_json_lists_flaky_cases_and_every_failed_attempt(
     proc = run_cli(["report", "--json", str(rerun_tree)], env, cwd=rerun_tree)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     data = json.loads(proc.stdout)
-    assert data["total"] == {"tests": 4, "errors": 0, "failures": 1, "skipped": 0, "flaky": 1}
+    assert data["total"] == {
+        "tests": 4,
+        "errors": 0,
+        "failures": 1,
+        "skipped": 0,
+        "flaky": 1,
+        "failed_then_not_run": 0,
+    }
     rows = {Path(row["path"]).name: row for row in data["files"]}
     assert rows["flaky.xml"]["flaky"] == 1
     assert rows["flaky.xml"]["failed_cases"] == []
@@ -375,6 +392,224 @@ def test_json_lists_flaky_cases_and_every_failed_attempt(
     assert failed["message"] == "try 3"
     assert [item["kind"] for item in failed["earlier_failures"]] == ["rerunFailure"] * 2
     assert [item["message"] for item in failed["earlier_failures"]] == ["try 1", "try 2"]
+
+
+# --- a case that failed and then was not run: never a pass (issue 30, item 5) -----------------
+
+#: What a test writes in its first attempt: ``a`` fails, ``b`` passes.
+FIRST_ATTEMPT = (
+    '<testsuite name="t" tests="2" failures="1"><testcase classname="C" name="a">'
+    '<failure message="late node" type="AssertionError">late node</failure></testcase>'
+    '<testcase classname="C" name="b"/></testsuite>\n'
+)
+#: Its second attempt: ``b`` passes and ``a`` is not there at all; or ``a`` passes too.
+WITHOUT_A = '<testsuite name="t" tests="1"><testcase classname="C" name="b"/></testsuite>\n'
+WITH_A = (
+    '<testsuite name="t" tests="2"><testcase classname="C" name="a"/>'
+    '<testcase classname="C" name="b"/></testsuite>\n'
+)
+#: sh -c: $0 state file, $1 first attempt's file or "" (none), $2 second's, $3 result file.
+TWO_ATTEMPTS = (
+    'if [ -e "$0" ]; then cat "$2" > "$3"; exit 0; fi; : > "$0"; '
+    'if [ -n "$1" ]; then cat "$1" > "$3"; fi; exit 1'
+)
+
+
+def rerun(env: dict[str, str], tmp_path: Path, first: str, second: str) -> tuple[Path, int]:
+    """A real test through ``run --rerun-failures 1`` that writes ``first``, then ``second``.
+
+    ``first`` empty: the first attempt writes no result file. The merged file, run's code.
+    """
+    files = []
+    for name, text in (("first.own", first), ("second.own", second)):
+        (tmp_path / name).write_text(text)
+        files.append(str(tmp_path / name) if text else "")
+    result = tmp_path / "out" / "t.xml"
+    command = ["sh", "-c", TWO_ATTEMPTS, str(tmp_path / "state"), *files, str(result)]
+    args = ["run", "--package-name", "pkg_a", "--rerun-failures", "1", "--junit-xml", str(result)]
+    proc = run_cli([*args, "--", *command], env, cwd=tmp_path)
+    assert "attempt 2 of 2: attempt 1 failed" in proc.stdout, proc.stdout + proc.stderr
+    assert result.is_file(), proc.stdout + proc.stderr
+    return result, proc.returncode
+
+
+def test_a_case_that_failed_and_then_was_not_run_is_a_failure_named_so(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """It was never seen to pass: the run, the file and report all say failed, never flaky."""
+    result, code = rerun(env, tmp_path, FIRST_ATTEMPT, WITHOUT_A)
+    assert code == 1
+    proc = run_cli(["report", str(result)], env, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert file_lines(proc.stdout) == {str(result): (2, 0, 1, 0)}
+    assert (
+        "Failed, then not run: 1 case(s) failed and no later attempt ran them "
+        "(counted as failures):\n"
+        f"- pkg_a.C a (1 failed attempt(s), then not run) in {result}\n"
+    ) in proc.stdout
+    assert "Flaky" not in proc.stdout and "passed after failing" not in proc.stdout
+    verbose = run_cli(["report", "-v", str(result)], env, cwd=tmp_path)
+    assert "- pkg_a.C a (failure)\n  Failed, then not run: failure in attempt 1" in verbose.stdout
+    assert "  rerunFailure: late node\n" in verbose.stdout
+    as_json = run_cli(["report", "--json", str(result)], env, cwd=tmp_path)
+    assert as_json.returncode == 1, as_json.stdout + as_json.stderr
+    data = json.loads(as_json.stdout)
+    assert data["total"]["failures"] == 1 and data["total"]["failed_then_not_run"] == 1
+    (row,) = data["files"]
+    assert (row["failed_then_not_run"], row["flaky"], row["flaky_cases"]) == (1, 0, [])
+    (case,) = row["failed_cases"]
+    assert (case["name"], case["outcome"], case["failed_then_not_run"]) == ("a", "failure", True)
+    assert case["message"].startswith("Failed, then not run: ")
+    assert case["earlier_failures"] == [
+        {"kind": "rerunFailure", "type": "AssertionError", "message": "late node"}
+    ]
+    # Every other reader sees a failure too: the file itself says so.
+    root = etree.parse(str(result)).getroot()
+    suite = root.find("testsuite")
+    assert suite is not None and suite.get("failures") == "1"
+    [failure] = [node for node in root.iter("failure") if node.get("type") == NOT_RUN_AGAIN_TYPE]
+    following = failure.getnext()
+    assert following is not None and following.tag == "rerunFailure"
+    assert root.find(".//flakyFailure") is None
+
+
+def test_control_the_failed_case_passing_in_the_rerun_is_a_flaky_pass(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    result, code = rerun(env, tmp_path, FIRST_ATTEMPT, WITH_A)
+    assert code == 0
+    proc = run_cli(["report", str(result)], env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Flaky: 1 case(s) passed after failing (not counted as failures):\n" in proc.stdout
+    assert f"- pkg_a.C a (1 failed attempt(s)) in {result}\n" in proc.stdout
+    assert "Failed, then not run" not in proc.stdout
+    data = json.loads(run_cli(["report", "--json", str(result)], env, cwd=tmp_path).stdout)
+    assert data["total"]["failed_then_not_run"] == 0 and data["total"]["flaky"] == 1
+
+
+def test_control_the_runners_own_case_of_a_failed_attempt_is_answered_by_the_rerun(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """Attempt 1 wrote no file (as a test that timed out): its case is the runner's, not a test's.
+
+    The rerun ran the whole test and it passed: what attempt 1 was is kept, as skipped
+    after failing, and the run passes.
+    """
+    result, code = rerun(env, tmp_path, "", WITHOUT_A)
+    assert code == 0
+    proc = run_cli(["report", str(result)], env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert file_lines(proc.stdout) == {str(result): (2, 0, 0, 1)}
+    assert "Flaky: 1 case(s) skipped after failing (not counted as failures):\n" in proc.stdout
+    assert f"- pkg_a.t t (1 failed attempt(s), then skipped) in {result}\n" in proc.stdout
+    assert "Failed, then not run" not in proc.stdout
+
+
+# --- a folder report cannot read (issue 30, item 4) --------------------------------------------
+
+
+def readable_tree(root: Path) -> tuple[Path, Path]:
+    """``tree/ok.xml`` passing and ``tree/sub/f.xml`` failing, every user may read them."""
+    tree, sub = root / "tree", root / "tree" / "sub"
+    sub.mkdir(parents=True)
+    shutil.copy(SAMPLES / "ament_run_test_success_result.xml", tree / "ok.xml")
+    shutil.copy(SAMPLES / "ament_run_test_missing_result.xml", sub / "f.xml")
+    for path, mode in ((tree, 0o755), (sub, 0o755), (tree / "ok.xml", 0o644)):
+        os.chmod(path, mode)
+    os.chmod(sub / "f.xml", 0o644)
+    return tree, sub
+
+
+def as_nobody(args: list[str], env: dict[str, str]) -> tuple[int, str]:
+    proc = run_cli(args, env, **user_keywords(65534))
+    return proc.returncode, proc.stdout + proc.stderr
+
+
+@capabilities.OTHER_USERS
+def test_control_a_readable_tree_reports_the_failure_in_its_sub_folder(
+    traversable_dir: Path, env: dict[str, str]
+) -> None:
+    tree, sub = readable_tree(traversable_dir)
+    code, out = as_nobody(["report", str(tree)], env)
+    assert code == 1, out
+    assert file_lines(out) == {f"{tree}/ok.xml": (1, 0, 0, 0), f"{sub}/f.xml": (1, 1, 0, 0)}
+
+
+@capabilities.OTHER_USERS
+@pytest.mark.parametrize("mode", [0o700, 0o711], ids=["no-access", "enter-only"])
+def test_a_folder_report_cannot_list_is_an_error_naming_it(
+    traversable_dir: Path, env: dict[str, str], mode: int
+) -> None:
+    tree, sub = readable_tree(traversable_dir)
+    os.chmod(sub, mode)
+    code, out = as_nobody(["report", "-v", str(tree)], env)
+    assert code == 1, out
+    assert file_lines(out) == {f"{tree}/ok.xml": (1, 0, 0, 0), str(sub): (1, 1, 0, 0)}
+    assert summary_of(out) == (2, 1, 0, 0)
+    assert (
+        f"- sub result folder (error)\n  Cannot read the result folder {sub}: Permission denied;"
+    ) in out
+    code, out = as_nobody(["report", "--json", str(tree)], env)
+    assert code == 1, out
+    rows = {row["path"]: row for row in json.loads(out)["files"]}
+    [case] = rows[str(sub)]["failed_cases"]
+    assert (case["name"], case["outcome"]) == ("result folder", "error")
+    assert str(sub) in case["message"]
+
+
+@capabilities.OTHER_USERS
+def test_a_folder_report_can_list_but_not_enter_fails_on_each_file_it_holds(
+    traversable_dir: Path, env: dict[str, str]
+) -> None:
+    """Its names are known, nothing in it can be opened: each file and folder is an error."""
+    tree, sub = readable_tree(traversable_dir)
+    (sub / "deeper").mkdir()
+    os.chmod(sub, 0o744)
+    code, out = as_nobody(["report", "-v", str(tree)], env)
+    assert code == 1, out
+    assert file_lines(out) == {
+        f"{tree}/ok.xml": (1, 0, 0, 0),
+        f"{sub}/f.xml": (1, 1, 0, 0),
+        f"{sub}/deeper": (1, 1, 0, 0),
+    }
+    assert "cannot open the result file: Permission denied" in out
+    assert f"Cannot read the result folder {sub}/deeper: Permission denied;" in out
+
+
+# --- hostile file names (issue 30, item 8) -----------------------------------------------------
+
+
+def test_a_file_name_cannot_forge_a_line_of_the_report(env: dict[str, str], tmp_path: Path) -> None:
+    """Control characters and undecodable bytes are shown as ``status`` shows them."""
+    folder = tmp_path / "results"
+    folder.mkdir()
+    forged = "a.xml: 0 tests, 0 errors, 0 failures, 0 skipped\nb.xml"
+    (folder / forged).write_text("this is not xml\n")  # an error case named after the file
+    styled = os.fsdecode(b"c\xff\x1b[31m.xml")
+    shutil.copy(SAMPLES / "ament_run_test_success_result.xml", folder / styled)
+    shutil.copy(SAMPLES / "ament_run_test_success_result.xml", folder / "plain.xml")
+    proc = run_cli(["report", str(folder)], env, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    shown_forged = "a.xml: 0 tests, 0 errors, 0 failures, 0 skipped\\x0ab.xml"
+    assert file_lines(proc.stdout) == {
+        f"{folder}/{shown_forged}": (1, 1, 0, 0),
+        f"{folder}/c\\xff\\x1b[31m.xml": (1, 0, 0, 0),
+        f"{folder}/plain.xml": (1, 0, 0, 0),  # the control: a plain name as it is
+    }
+    assert summary_of(proc.stdout) == (3, 1, 0, 0)
+    assert len(proc.stdout.splitlines()) == 5  # three files, a blank line, the summary
+    # -v: the case named after the file is one line too; messages are indented under it.
+    verbose = run_cli(["report", "-v", str(folder)], env, cwd=tmp_path).stdout
+    own_lines = [line for line in verbose.splitlines() if not line.startswith("  ")]
+    assert not [line for line in own_lines if line.startswith("b")], verbose
+    assert "- a.xml: 0 tests, 0 errors, 0 failures, 0 skipped\\x0ab result file (error)\n" in (
+        verbose
+    )
+    # JSON carries each path exactly (its escapes are JSON's): each can be opened.
+    data = json.loads(run_cli(["report", "--json", str(folder)], env, cwd=tmp_path).stdout)
+    assert sorted(row["path"] for row in data["files"]) == sorted(
+        str(folder / name) for name in (forged, styled, "plain.xml")
+    )
 
 
 # --- usage errors ------------------------------------------------------------------------------

@@ -3,8 +3,9 @@
 A rerun that overwrites the failed attempt's file hides the flake. Here each case of the
 last attempt carries the failures of the earlier ones in Surefire's shape, which Jenkins
 and junitparser read: ``flaky*`` when the case finally passed (or was skipped),
-``rerun*`` when it failed every time. What is kept is bounded (:func:`kept`), so a
-hundred reruns cost a result file about as much as ten.
+``rerun*`` when it failed every time. A case that failed and that no later attempt ran
+never passed: it stays a failure ("failed, then not run"). What is kept is bounded
+(:func:`kept`), so a hundred reruns cost a result file about as much as ten.
 """
 
 from __future__ import annotations
@@ -33,20 +34,36 @@ CUT_NOTE = "[... {cut} more attempt(s) not kept ...]"
 _CUT_NOTE = re.compile(r"^\[\.\.\. ([0-9]{1,9}) more attempt\(s\) not kept \.\.\.\]")
 #: How a case of an earlier attempt that the last attempt no longer has is kept (skipped).
 ABSENT = "Not in the last attempt ({total} of {total}): last seen in attempt {seen}, {outcome}."
+#: How a test's case that failed and that no later attempt ran is kept: still failed.
+NOT_RUN_AGAIN = (
+    "Failed, then not run: {outcome} in attempt {seen}, not in any later attempt "
+    "(the last is {total}), so it never passed."
+)
+#: The ``type`` of such a case, by which ``report`` names it.
+NOT_RUN_AGAIN_TYPE = "FailedThenNotRun"
+#: The runner's own cases about how an attempt ended (``normalise``: the exit, a damaged
+#: file, counts it claimed; ``session``: a lost output file), besides the one named after
+#: the test (a timeout, no result file). A later attempt that ended well answers them.
+ATTEMPT_CASES = frozenset(
+    ("test process exit", "result file", "unreported test cases", "output file")
+)
 
 
 def merge_attempts(attempts: Sequence[Suite]) -> Suite:
     """One suite for a test's ``attempts`` (each one's canonical suite, oldest first).
 
     The cases are the last attempt's, each carrying the earlier attempts' failures; a
-    case the last attempt lacks is kept after them as skipped, saying so (see
-    :data:`ABSENT`), with its failures as flaky ones: the last attempt's exit code rules,
-    and a case that did not run there neither passed nor failed. Counts are the cases',
-    so a flaky pass counts as passed. Properties are the last attempt's, plus
-    ``attempts``, ``flaky_cases`` and ``attempt_<k>.<name>`` for each property an earlier
-    attempt ``k`` had with another value (its domain ID, exit code, duration). Cases
-    of different attempts whose GitLab keys collide are renamed as ``normalise`` renames
-    one file's, said in ``renamed_cases``.
+    case the last attempt lacks is kept after them. A test's case whose last outcome was
+    a failure or an error never passed: it stays one, saying so (:data:`NOT_RUN_AGAIN`),
+    its failures as ``rerun*``, and fails the merged file (Surefire calls a test flaky
+    only once a rerun of it passed). Any other is kept as skipped (:data:`ABSENT`), its
+    failures as flaky ones: one that passed and then did not run, or the runner's own
+    case about how an attempt ended (timed out, exited 1), which the later attempts' own
+    ending answers. Counts are the cases', so a flaky pass counts as passed. Properties
+    are the last attempt's, plus ``attempts``, ``flaky_cases`` and ``attempt_<k>.<name>``
+    for each property an earlier attempt ``k`` had with another value (its domain ID,
+    exit code, duration). Cases of different attempts whose GitLab keys collide are
+    renamed as ``normalise`` renames one file's, said in ``renamed_cases``.
     """
     if not attempts:
         raise ValueError("merge_attempts needs the suite of at least one attempt")
@@ -58,9 +75,14 @@ def merge_attempts(attempts: Sequence[Suite]) -> Suite:
             earlier.setdefault((case.classname, case.name), []).append((number, case, suite))
     cases = [_merged(case, earlier.pop((case.classname, case.name), [])) for case in last.cases]
     for seen in earlier.values():
-        number, case, _ = seen[-1]
-        message = ABSENT.format(total=total, seen=number, outcome=case.outcome.value)
-        absent = Case.saying(case.classname, case.name, Outcome.SKIPPED, message)
+        number, case, suite = seen[-1]
+        values = {"total": total, "seen": number, "outcome": case.outcome.value}
+        named = (case.classname, case.name)
+        if case.outcome.failed and not _about_the_attempt(case, suite):
+            message = NOT_RUN_AGAIN.format(**values)
+            absent = Case.saying(*named, case.outcome, message, NOT_RUN_AGAIN_TYPE)
+        else:
+            absent = Case.saying(*named, Outcome.SKIPPED, ABSENT.format(**values))
         cases.append(_merged(absent, seen))
     properties = dict(last.properties)
     if len({f"{case.classname}_{case.name}" for case in cases}) < len(cases):
@@ -130,6 +152,17 @@ def _kept_numbers(count: int) -> list[int]:
         return numbers
     head = ATTEMPTS_KEPT // 2
     return numbers[:head] + numbers[count - (ATTEMPTS_KEPT - head) :]
+
+
+def _about_the_attempt(case: Case, suite: Suite) -> bool:
+    """Whether ``case`` is the runner's own word on how the attempt of ``suite`` ended.
+
+    The runner puts those in the suite's own class (``<package>.<test name>``), named
+    after the test or as :data:`ATTEMPT_CASES` says; the test's own cases have theirs.
+    """
+    if case.classname != suite.name:
+        return False
+    return case.name in ATTEMPT_CASES or suite.name.endswith(f".{case.name}")
 
 
 def _merged(case: Case, seen: list[tuple[int, Case, Suite]]) -> Case:
