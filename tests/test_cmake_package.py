@@ -14,8 +14,8 @@ when no runner is found. A real wheel installs the CMake files where CMake finds
 from __future__ import annotations
 
 import importlib
+import json
 import os
-import shutil
 import subprocess
 import sys
 import sysconfig
@@ -25,7 +25,13 @@ from typing import Any
 
 import pytest
 from helpers import capabilities
-from helpers.cmake_package import CMAKE_FILES, PackageBuild, installed_prefix, path_only_env
+from helpers.cmake_package import (
+    CMAKE_FILES,
+    PackageBuild,
+    build_wheel,
+    installed_prefix,
+    path_only_env,
+)
 from helpers.commands import REPO
 from helpers.domains import free_ids
 from helpers.results import load_result
@@ -263,24 +269,7 @@ def test_pip_installs_every_cmake_file_beside_the_command() -> None:
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A real wheel of the project, built once from a copy (the checkout is never written)."""
-    root = tmp_path_factory.mktemp("wheel")
-    source = root / "src"
-    source.mkdir()
-    for name in ("pyproject.toml", "README.md"):
-        shutil.copy(REPO / name, source / name)
-    shutil.copytree(
-        REPO / "ros_isolated_test",
-        source / "ros_isolated_test",
-        ignore=shutil.ignore_patterns("__pycache__"),
-    )
-    done = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--disable-pip-version-check",
-         "-q", "-w", str(root / "dist"), str(source)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
-    assert done.returncode == 0, f"pip wheel failed:\n{done.stdout}{done.stderr}"
-    (built,) = (root / "dist").glob("ros_isolated_test-*.whl")
-    return built
+    return build_wheel(tmp_path_factory.mktemp("wheel"))
 
 
 def test_the_wheel_ships_every_cmake_file_as_share_data(wheel: Path) -> None:
@@ -489,3 +478,82 @@ def test_resources_and_reruns_pass_into_ctest(tmp_path: Path) -> None:
         wrapped
     )
     assert "ROS_ISOLATED_TEST_" not in own, own
+
+
+#: The registered test: its arguments, one a line, then what ``status --json`` shows it
+#: holding while it runs (the ROS_DOMAIN_ID the runner gave it finds its hold).
+_PROBE_SH = (
+    'out="$1"; shift; printf "%s\\n" "$@" > "$out.args"\n'
+    'ros-isolated-test status --json > "$out.json"\n'
+    'echo "$ROS_DOMAIN_ID" > "$out.id"\n'
+)
+
+RESOURCE_FORMS = [
+    pytest.param('ros_isolated_add_test(t COMMAND {probe} RESOURCES "gpu=1;cpu=1"{tail})',
+                 id="macro-cmake-list"),
+    pytest.param("ros_isolated_add_test(t COMMAND {probe} RESOURCES gpu=1 cpu=1{tail})",
+                 id="macro-separate-words"),
+    pytest.param('ros_isolated_test_all(RESOURCES "gpu=1;cpu=1")\n'
+                 "ament_add_test(t COMMAND {probe}{tail})", id="all-cmake-list"),
+    pytest.param("ros_isolated_add_test(t COMMAND {probe} RESOURCES gpu=1,cpu=1{tail})",
+                 id="control-macro-commas"),
+    pytest.param("ros_isolated_test_all(RESOURCES gpu=1,cpu=1)\n"
+                 "ament_add_test(t COMMAND {probe}{tail})", id="control-all-commas"),
+]  # fmt: skip
+
+
+@capabilities.CTEST.mark
+@pytest.mark.parametrize("call", RESOURCE_FORMS)
+def test_a_resources_list_holds_every_request_and_leaves_the_command_alone(
+    tmp_path: Path, env: dict[str, str], call: str
+) -> None:
+    """``RESOURCES "gpu=1;cpu=1"`` held gpu=1 only and appended cpu=1 to the COMMAND (and
+    ros_isolated_test_all() refused it). Every form is one request on every path: the
+    test, while it runs, sees both held by its runner, and gets only its own arguments.
+    The comma-separated forms, which always worked, are the controls."""
+    probe = tmp_path / "probe.sh"
+    probe.write_text(_PROBE_SH)
+    out = tmp_path / "out"
+    command = f"sh {probe} {out} first second"
+    done = _configure(
+        tmp_path, call.format(probe=command, tail=" GENERATE_RESULT_FOR_RETURN_CODE_ZERO") + "\n"
+    )
+    assert done.returncode == 0, done.stderr
+    ctest_env = {
+        **path_only_env(installed_prefix(tmp_path)),
+        "ROS_ISOLATED_TEST_LOCK_DIR": env["ROS_ISOLATED_TEST_LOCK_DIR"],
+        "ROS_ISOLATED_TEST_DOMAINS": ",".join(map(str, free_ids(1))),
+        "ROS_ISOLATED_TEST_CAPACITY": "cpu=1,gpu=1",
+    }
+    for name in ("ROS_DOMAIN_ID", "ROS_ISOLATED_TEST_RESOURCES"):
+        ctest_env.pop(name, None)
+    build = tmp_path / "build"
+
+    run = _ctest(build, ctest_env)
+
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert Path(f"{out}.args").read_text().splitlines() == ["first", "second"]
+    domain_id = int(Path(f"{out}.id").read_text())
+    rows = json.loads(Path(f"{out}.json").read_text())
+    holds = [row for row in rows if row["via"] == "hold"]
+    assert [(row["domain_id"], row["resources"]) for row in holds] == [
+        (domain_id, {"cpu": 1, "gpu": 1})
+    ], rows
+    properties = _properties(build / "test_results" / "tiny" / "t.xml")
+    assert properties.get("resources") == "cpu=1,gpu=1", properties
+
+
+def test_a_resources_list_takes_only_the_requests_right_after_it(tmp_path: Path) -> None:
+    """The list ends at the first word that is no name=amount request: a name=value word
+    in the COMMAND after it stays in the COMMAND, and a RERUNS after it is still read."""
+    done = _configure(
+        tmp_path,
+        'ros_isolated_add_test(t RESOURCES "gpu=1;cpu=1" RERUNS 1 COMMAND env a=b true)\n',
+    )
+    assert done.returncode == 0, done.stderr
+    lines = (tmp_path / "build" / "CTestTestfile.cmake").read_text().splitlines()
+    line = next(line for line in lines if "[=[t]=]" in line)
+    assert '"--command" "env" "a=b" "true"' in line, line
+    assert (
+        '"--env" "ROS_ISOLATED_TEST_RERUNS=1" "ROS_ISOLATED_TEST_RESOURCES=gpu=1,cpu=1"' in line
+    ), line

@@ -1,9 +1,9 @@
 # ros_isolated_test_all([RERUNS n] [RESOURCES spec]): one line that puts every test of the
 # package on our RUNNER; with RERUNS, each of them runs again up to n times when it fails
 # (every attempt kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS;
-# with RESOURCES (e.g. cpu=2,mem=4G), each of them holds those machine resources with its
-# domain ID (waiting until they are free), unless its own ENV sets
-# ROS_ISOLATED_TEST_RESOURCES. A test with a RUNNER of its own gets neither.
+# with RESOURCES (e.g. cpu=2,mem=4G, or a CMake list "cpu=2;mem=4G"), each of them holds
+# those machine resources with its domain ID (waiting until they are free), unless its own
+# ENV sets ROS_ISOLATED_TEST_RESOURCES. A test with a RUNNER of its own gets neither.
 #
 # ament_add_gtest, ament_add_gmock, ament_add_pytest_test, add_launch_test and third-party
 # macros all register their tests through ament_add_test, whose RUNNER defaults to ament's
@@ -39,13 +39,13 @@ endmacro()
 # RERUNS and RESOURCES of ros_isolated_test_all(), checked and kept for the tests added
 # from now on (a later call replaces only what it names).
 function(_ros_isolated_test_all_options)
-  cmake_parse_arguments(_rit "" "RERUNS;RESOURCES" "" ${ARGN})
-  if(_rit_UNPARSED_ARGUMENTS)
+  # The parser of the ros_isolated_add_* macros: a RESOURCES list means the same here.
+  _ros_isolated_test_parse(_unknown _rit_RERUNS _rit_RESOURCES _missing ${ARGN})
+  if(_unknown)
     message(FATAL_ERROR "ros_isolated_test_all(): unknown argument(s) "
-      "'${_rit_UNPARSED_ARGUMENTS}'; it takes RERUNS <n> and RESOURCES <spec> only")
+      "'${_unknown}'; it takes RERUNS <n> and RESOURCES <spec> only")
   endif()
-  _ros_isolated_test_env(_checked "${_rit_KEYWORDS_MISSING_VALUES}" "${_rit_RERUNS}"
-    "${_rit_RESOURCES}")
+  _ros_isolated_test_env(_checked "${_missing}" "${_rit_RERUNS}" "${_rit_RESOURCES}")
   foreach(_keyword RERUNS RESOURCES)
     if(NOT "${_rit_${_keyword}}" STREQUAL "")
       set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_${_keyword} "${_rit_${_keyword}}")
@@ -80,7 +80,9 @@ function(_ros_isolated_test_wrap_ament_add_test)
         "only one earlier definition, so that one now calls this wrapper, and the wrapper "
         "itself). Two wrappers of ament_add_test cannot be combined: instead of "
         "ros_isolated_test_all(), use the ros_isolated_add_* macros, or pass "
-        "RUNNER \"\${ros_isolated_test_RUNNER}\" to ament_add_test.")
+        "RUNNER \"\${ros_isolated_test_RUNNER}\" to ament_add_test; where ros-isolated-test's "
+        "CMAKE_PROJECT_INCLUDE called it, configure this package with "
+        "-DROS_ISOLATED_TEST_ALL=OFF.")
     endif()
     set_property(GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_ENTERED TRUE)
     # The same keywords as ament_add_test itself, so exactly the words it would read as

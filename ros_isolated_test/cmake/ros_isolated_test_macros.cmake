@@ -2,9 +2,10 @@
 # RUNNER. Each takes exactly the arguments of the macro it wraps, and two more:
 # RERUNS <n> runs a failed test again up to n times, every attempt kept in its result file
 # (ENV ROS_ISOLATED_TEST_RERUNS=<n>, which the RUNNER reads);
-# RESOURCES <spec> (e.g. RESOURCES cpu=2,mem=4G,gpu=1) makes the test hold those machine
-# resources with its domain ID, waiting until every other runner on the machine has left
-# enough of them free (ENV ROS_ISOLATED_TEST_RESOURCES=<spec>, which the RUNNER checks).
+# RESOURCES <spec> (e.g. RESOURCES cpu=2,mem=4G,gpu=1, or a CMake list "cpu=2;gpu=1")
+# makes the test hold those machine resources with its domain ID, waiting until every
+# other runner on the machine has left enough of them free
+# (ENV ROS_ISOLATED_TEST_RESOURCES=<spec>, which the RUNNER checks).
 # Our RUNNER comes first, so a RUNNER the call names itself comes later and wins
 # (cmake_parse_arguments keeps the last value).
 
@@ -22,12 +23,57 @@ endfunction()
 # ENV ROS_ISOLATED_TEST_RERUNS=<n> ROS_ISOLATED_TEST_RESOURCES=<spec>.
 # Last: ament_add_test passes ENV on as --env, where the last value of a variable wins.
 function(_ros_isolated_test_arguments var)
-  cmake_parse_arguments(_rit "" "RERUNS;RESOURCES" "" ${ARGN})
-  set(_arguments ${_rit_UNPARSED_ARGUMENTS})
-  _ros_isolated_test_env(_env "${_rit_KEYWORDS_MISSING_VALUES}" "${_rit_RERUNS}"
-    "${_rit_RESOURCES}")
+  _ros_isolated_test_parse(_arguments _reruns _resources _missing ${ARGN})
+  _ros_isolated_test_env(_env "${_missing}" "${_reruns}" "${_resources}")
   list(APPEND _arguments ${_env})
   set(${var} "${_arguments}" PARENT_SCOPE)
+endfunction()
+
+# RERUNS <n> and RESOURCES <spec> taken out of ARGN: their values in ${reruns_var} and
+# ${resources_var}, the other words (in order) in ${rest_var}, and in ${missing_var} the
+# keywords given without a value. As cmake_parse_arguments would, a later value wins,
+# but RESOURCES also takes every name=amount word right after its value: a macro's ARGN
+# splits a CMake list (RESOURCES "gpu=1;cpu=1") into words, which would otherwise hold
+# only gpu=1 and append cpu=1 to the test's COMMAND. They are one request, joined by
+# commas, the separator the RUNNER reads. Any name counts (GPU=1 too): the RUNNER says
+# what is wrong with it, where in the COMMAND it would pass unnoticed.
+function(_ros_isolated_test_parse rest_var reruns_var resources_var missing_var)
+  set(_rest "")
+  set(_value_RERUNS "")
+  set(_value_RESOURCES "")
+  set(_missing "")
+  set(_expect "")
+  set(_more FALSE)
+  foreach(_word IN LISTS ARGN)
+    if(_more AND _word MATCHES "^ *[A-Za-z_][A-Za-z0-9_-]* *=")
+      string(APPEND _value_RESOURCES ",${_word}")
+      continue()
+    endif()
+    set(_more FALSE)
+    if(_word STREQUAL "RERUNS" OR _word STREQUAL "RESOURCES")
+      if(_expect)
+        list(APPEND _missing ${_expect})
+      endif()
+      set(_expect "${_word}")
+      set(_value_${_word} "")
+    elseif(_expect)
+      set(_value_${_expect} "${_word}")
+      list(REMOVE_ITEM _missing ${_expect})
+      if(_expect STREQUAL "RESOURCES")
+        set(_more TRUE)
+      endif()
+      set(_expect "")
+    else()
+      list(APPEND _rest "${_word}")
+    endif()
+  endforeach()
+  if(_expect)
+    list(APPEND _missing ${_expect})
+  endif()
+  set(${rest_var} "${_rest}" PARENT_SCOPE)
+  set(${reruns_var} "${_value_RERUNS}" PARENT_SCOPE)
+  set(${resources_var} "${_value_RESOURCES}" PARENT_SCOPE)
+  set(${missing_var} "${_missing}" PARENT_SCOPE)
 endfunction()
 
 # ENV ROS_ISOLATED_TEST_RERUNS=<reruns> ROS_ISOLATED_TEST_RESOURCES=<resources> in ${var},

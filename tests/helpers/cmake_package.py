@@ -28,7 +28,11 @@ if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
 PACKAGE = "isolated_all"
 PACKAGE_DIR = REPO / "examples" / PACKAGE
 CMAKE_FILES = REPO / "ros_isolated_test" / "cmake"
-_ADD_TEST = re.compile(r"^add_test\(\[=\[(?P<name>[^\]]+)\]=\] (?P<args>.*)\)$", re.MULTILINE)
+#: A test's name is bracketed (``[=[name]=]``) under policy CMP0110 (CMake 3.19), bare before.
+_ADD_TEST = re.compile(
+    r"^add_test\((?:\[=\[(?P<bracketed>[^\]]+)\]=\]|(?P<bare>[^ \[]+)) (?P<args>.*)\)$",
+    re.MULTILINE,
+)
 _QUOTED = re.compile(r'"((?:[^"\\]|\\.)*)"')
 
 
@@ -46,6 +50,37 @@ def installed_prefix(root: Path) -> Path:
         if not link.is_symlink():
             link.symlink_to(target)
     return prefix
+
+
+def runners_of(ctest_file: Path) -> dict[str, str]:
+    """Each test's RUNNER script in a CTestTestfile.cmake of ament_add_test tests."""
+    runners: dict[str, str] = {}
+    for match in _ADD_TEST.finditer(ctest_file.read_text()):
+        args = _QUOTED.findall(match["args"])
+        runners[match["bracketed"] or match["bare"]] = args[args.index("-u") + 1]
+    return runners
+
+
+def build_wheel(root: Path) -> Path:
+    """A real wheel of the project in ``root/dist``, built from a copy (the checkout is never
+    written)."""
+    source = root / "src"
+    source.mkdir(parents=True)
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(REPO / name, source / name)
+    shutil.copytree(
+        REPO / "ros_isolated_test",
+        source / "ros_isolated_test",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--disable-pip-version-check",
+         "-q", "-w", str(root / "dist"), str(source)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, f"pip wheel failed:\n{done.stdout}{done.stderr}"
+    (built,) = (root / "dist").glob("ros_isolated_test-*.whl")
+    return built
 
 
 def path_only_env(prefix: Path) -> dict[str, str]:
@@ -114,12 +149,7 @@ class PackageBuild:
 
     def runners(self) -> dict[str, str]:
         """Each registered test's RUNNER script, read from the CTestTestfile.cmake CMake wrote."""
-        text = (self.build_dir / "CTestTestfile.cmake").read_text()
-        runners: dict[str, str] = {}
-        for match in _ADD_TEST.finditer(text):
-            args = _QUOTED.findall(match["args"])
-            runners[match["name"]] = args[args.index("-u") + 1]
-        return runners
+        return runners_of(self.build_dir / "CTestTestfile.cmake")
 
     def cache_value(self, name: str) -> str:
         """A value from the build's CMakeCache.txt."""
