@@ -4,10 +4,17 @@
 #   docker run --rm -v "$PWD:/ws" -w /ws ros-isolated-test \
 #       run --junit-xml results/talker.xml -- python3 -m pytest test/test_talker.py
 #
-# Containers on one host share the pool when they share the lock directory and the
-# host's network (see "Docker" in README.md):
-#   docker run --rm --network host -v /tmp/ros-isolated-test-domains:/tmp/ros-isolated-test-domains ...
-FROM ros:jazzy-ros-base
+# Containers that share the host's network and IPC namespaces talk ROS to each other (and
+# to the host): give them the host's PID namespace and lock directory too, for distinct
+# IDs (see "Docker" in README.md):
+#   docker run --rm --network host --ipc host --pid host \
+#       -v /tmp/ros-isolated-test-domains:/tmp/ros-isolated-test-domains ...
+#
+# The base is an argument, so the same file builds on any ROS 2 image that has
+# /ros_entrypoint.sh and python3 (Kilted, Humble, an image of your own):
+#   docker build --build-arg BASE=ros:kilted-ros-base -t ros-isolated-test:kilted .
+ARG BASE=ros:jazzy-ros-base
+FROM ${BASE}
 
 # pip and venv from Ubuntu; the runner itself needs only click, filelock and lxml.
 RUN apt-get update \

@@ -1,8 +1,9 @@
-"""The Dockerfile, checked statically: there is no Docker engine to build it here.
+"""The Dockerfile, checked statically, for machines without a Docker engine.
 
 What it installs and runs is read from the file itself with a small parser (Dockerfile
 instructions, JSON exec forms, the shell commands of RUN), and the build context with
 the same .dockerignore rules Docker applies, so a COPY of an ignored file is caught.
+Where an engine can run, tests/test_docker_engine.py builds the image and runs it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import PurePosixPath
 import pytest
 from helpers import capabilities
 from helpers.commands import REPO, run_cli
+from helpers.docker_engine import HOST_NAMESPACES, STANDIN_DOCKERFILE
 
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, lock_dir_from_env
 
@@ -246,9 +248,50 @@ def package_dir(instructions: list[Instruction]) -> str:
 # -- the image ------------------------------------------------------------------------------
 
 
-def test_the_image_is_built_from_ros_jazzy_ros_base(instructions: list[Instruction]) -> None:
-    assert instructions[0].keyword == "FROM"
-    assert only(instructions, "FROM").arguments == BASE_IMAGE
+def base_arguments(instructions: list[Instruction]) -> dict[str, str | None]:
+    """The ARGs declared before FROM (the only ones FROM may use), with their defaults."""
+    declared: dict[str, str | None] = {}
+    for item in instructions:
+        if item.keyword == "FROM":
+            break
+        assert item.keyword == "ARG", f"only ARG may come before FROM, not {item}"
+        name, equals, default = item.arguments.partition("=")
+        declared[name.strip()] = default.strip().strip("\"'") if equals else None
+    return declared
+
+
+def test_the_base_is_an_argument_that_defaults_to_ros_jazzy_ros_base(
+    instructions: list[Instruction],
+) -> None:
+    """One file for Jazzy, Kilted, Humble or a stand-in: ``--build-arg BASE=...``."""
+    base = only(instructions, "FROM").arguments
+    match = re.fullmatch(r"\$\{(\w+)\}|\$(\w+)", base)
+    assert match, f"FROM {base}: the base must come from an ARG declared before FROM"
+    name = match.group(1) or match.group(2)
+    assert base_arguments(instructions).get(name) == BASE_IMAGE
+
+
+#: What only a test machine needs (its CA bundle, its proxy, its package index): never in
+#: the image users build.
+TEST_ONLY = re.compile(
+    r"proxy|PIP_CERT|CA_BUNDLE|SSL_CERT|\.crt\b|\.pem\b|--cert\b|index-url|"
+    r"trusted-host|find-links|PIP_NO_INDEX|PIP_INDEX",
+    re.IGNORECASE,
+)
+
+
+def settings_for_tests(instructions: list[Instruction]) -> list[Instruction]:
+    return [item for item in instructions if TEST_ONLY.search(item.arguments)]
+
+
+def test_nothing_in_the_dockerfile_is_for_tests(instructions: list[Instruction]) -> None:
+    assert settings_for_tests(instructions) == [], "these belong to the tests' stand-in base"
+
+
+def test_control_the_stand_in_base_has_test_only_settings_that_the_check_finds() -> None:
+    """Without this, the check above could match nothing at all."""
+    stand_in = parse_dockerfile(STANDIN_DOCKERFILE.read_text(encoding="utf-8"))
+    assert settings_for_tests(stand_in), "the stand-in installs from its wheelhouse only"
 
 
 def test_the_package_is_copied_from_the_repo(instructions: list[Instruction]) -> None:
@@ -448,15 +491,19 @@ def volumes(command: list[str]) -> list[tuple[str, str]]:
     return mounts
 
 
-def test_the_readme_shows_docker_run_with_the_shared_lock_dir_and_host_network() -> None:
+def test_the_readme_shows_docker_run_with_the_shared_lock_dir_and_host_namespaces() -> None:
+    """The line tests/test_docker_engine.py runs: host network, IPC and PID, one lock dir."""
     readme = (REPO / "README.md").read_text(encoding="utf-8")
     image = image_name()
     runs = [command for command in docker_commands(readme, "run") if image in command]
     assert runs, f"README has no 'docker run ... {image}' line"
     default = str(lock_dir_from_env({}))
     shared = []
+    namespaces = dict(zip(HOST_NAMESPACES[::2], HOST_NAMESPACES[1::2], strict=True))
     for command in runs:
-        host_network = "host" in option_values(command, "--network", "--net")
+        host_network = all(
+            option_values(command, name) == [value] for name, value in namespaces.items()
+        )
         configured = [
             value.split("=", 1)[1]
             for value in option_values(command, "-e", "--env")
@@ -465,4 +512,5 @@ def test_the_readme_shows_docker_run_with_the_shared_lock_dir_and_host_network()
         lock_dir = configured[-1] if configured else default
         if host_network and any(inside == lock_dir for _, inside in volumes(command)):
             shared.append(command)
-    assert shared, f"README has no 'docker run --network host -v {default}:{default} ... {image}'"
+    flags = " ".join(HOST_NAMESPACES)
+    assert shared, f"README has no 'docker run {flags} -v {default}:{default} ... {image}'"

@@ -7,7 +7,8 @@ per session), cmake_package and launch_env (the CMake package's and the launch t
 builds), peak_rss (a child's memory, never charged with pytest's), distros (the Jazzy and
 Kilted venvs, and the environment a sourced setup of each gives), overlap (runners started
 at once, proving no two held one ID), readers (how colcon, xunit-viewer, junitparser,
-GitLab and Jenkins read a result file), capabilities (the only way to skip). Test modules
+GitLab and Jenkins read a result file), docker_engine (a real Docker engine, the stand-in
+base and the project's image, built once), capabilities (the only way to skip). Test modules
 import from here, never from each other and never from ``conftest``, which holds fixtures
 only. The other ``*.py`` here are programs the tests run as processes (talkers,
 listeners).
