@@ -13,6 +13,8 @@ are held with the ID by the same reservation, for the whole session (each xdist 
 Loaded by every pytest run in the environment, so it imports nothing of its own until it
 knows it is active: inside a ROS package (a package.xml at or above the rootdir or the
 test paths), or asked for with ``--ros-isolation`` or the ``ros_isolation`` ini option.
+Where launch_testing's own plugin is loaded, its launch files are reported case by case
+(launch_cases.py, whatever isolation decides; ``-p no:ros_isolated_test`` turns it off).
 """
 
 from __future__ import annotations
@@ -20,7 +22,9 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from collections.abc import Generator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -55,6 +59,12 @@ class _State:
         self.error: str | None = None
         #: The ID is being released: a signal now must not cut the sweep short.
         self.closing = False
+        #: A signal ended the session (an xdist process: later ones only noted).
+        self.interrupted = False
+        #: The xdist controller: each local worker (its WorkerController) and PID.
+        self.workers: list[tuple[Any, int]] = []
+        #: The xdist controller, interrupted: a second signal stops its wait for the workers.
+        self.hurry = False
 
 
 _STATE = pytest.StashKey[_State]()
@@ -142,6 +152,11 @@ def _in_ros_package(config: pytest.Config) -> bool:
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config: pytest.Config) -> None:
     """Decide, and reserve before collection (before any test module imports rclpy)."""
+    if "launch_testing.pytest.hooks" in sys.modules:  # its launch files: case by case
+        from ros_isolated_test import launch_cases
+
+        if not config.pluginmanager.has_plugin(launch_cases.PLUGIN_NAME):
+            config.pluginmanager.register(launch_cases, launch_cases.PLUGIN_NAME)
     if any(getattr(config.option, name, False) for name in _NO_TEST_OPTIONS):
         return  # --help, --markers, --fixtures, --collect-only: no test runs
     requested = _requested(config)
@@ -162,6 +177,7 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
     from ros_isolated_test.domain_coordinator.holdings import CapacityConflictError
     from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
     from ros_isolated_test.domain_coordinator.reservation import PoolExhaustedError
+    from ros_isolated_test.process.namespace import NamespaceError
     from ros_isolated_test.process.supervisor import KILL_GRACE
     from ros_isolated_test.runner import environment, exit_codes, session, settings
     from ros_isolated_test.runner.discovery import DiscoveryError
@@ -177,9 +193,12 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
         config_settings = settings.read(
             environ, reruns=0, resources=asked, resources_origin=asked_by
         )
-        policy = environment.decide((), config_settings, environ)
+        # The tests run in this process (it enters any namespaces itself); xdist's workers
+        # run threads, so they cannot.
+        xdist = controller or hasattr(config, "workerinput")
+        policy = environment.decide((), config_settings, environ, in_process=True, xdist=xdist)
     except environment.RefusedError as refusal:
-        if explicit:
+        if explicit or refusal.variable == settings.ISOLATION_ENV:  # namespaces asked for
             raise pytest.UsageError(f"ros-isolated-test: {refusal}") from None
         _left_alone(state, refusal.variable)
         return
@@ -190,10 +209,12 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
         state.header.extend(f"ros-isolated-test: {line}" for line in lines)
         state.properties.extend(properties.items())
         return
+    worker = hasattr(config, "workerinput")
     if controller:
         _for_each_worker(state, policy, config_settings)
+        _interruptible(state, once=True)  # passed on to the workers, which hold the IDs
         return  # the controller runs no test
-    _interruptible(state)
+    _interruptible(state, once=worker)
     command = ("pytest", *config.invocation_params.args)
     try:
         held = state.stack.enter_context(
@@ -201,9 +222,11 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
         )
     except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
         state.error = f"ros-isolated-test: error: {error}"
-        if hasattr(config, "workerinput"):
+        if worker:
             return  # said to the controller (pytest_collection): a crash would be restarted
         pytest.exit(state.error, returncode=exit_codes.NO_DOMAIN)
+    except NamespaceError as error:  # probed allowed, then refused to this process
+        raise pytest.UsageError(f"ros-isolated-test: {policy.refusal(error)}") from None
     assert held is not None  # isolated, or resources held without an ID
     _holding(config, state, policy, config_settings, held)
 
@@ -246,7 +269,7 @@ def _holding(
         # Restored first on the way out (LIFO): before the sweep and the release.
         state.stack.callback(_set_environ, dict(os.environ))
         _set_environ(policy.for_domain(held.domain_id))
-        lines, properties = session.summary(policy, held.domain_id, config_settings)
+        lines, properties = session.summary(policy, held.domain_id, config_settings, held.reserved)
         if policy.discovery is not None:  # its first line: the range, said beside the ID
             lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
         else:
@@ -275,23 +298,79 @@ def _left_alone(state: _State, name: str) -> None:
     state.properties.append((property_name, f"{preset} (preset, not isolated)"))
 
 
-def _interruptible(state: _State) -> None:
+def _interruptible(state: _State, once: bool = False) -> None:
     """SIGTERM and SIGHUP (ctest's, colcon's timeout, a CI cancel) end pytest as Ctrl-C does.
 
     Without this pytest dies at once: no unconfigure, so what the tests left running is
     never ended (a plain fork even inherits the lock) and the ID stays held. Once the
     release began, a signal is ignored: a second Ctrl-C must not cut the sweep short.
+    With xdist the workers hold the IDs: the controller passes each signal on to them
+    (else they learn of its end only from execnet, 5 s later, and are killed mid-sweep 10 s
+    later), then waits for them (pytest_sessionfinish). There a signal may come twice
+    (from the process group and passed on): with ``once`` only the first interrupts.
     Outside the main thread (an embedding program) its own handlers stay.
     """
     from ros_isolated_test.process import supervisor
 
     def stop(signum: int, _frame: object) -> None:
-        if not state.closing:
+        passed_on = _pass_on(state, signum)
+        if state.closing:
+            _note(f"signal {signum} ignored: ending what the tests left running first")
+        elif once and state.interrupted:
+            if passed_on:
+                state.hurry = True  # the controller: no longer waits for its workers
+            what = "passed on to the xdist workers" if passed_on else "ignored"
+            _note(f"signal {signum} {what}: the session is already ending")
+        else:
+            state.interrupted = True
             raise KeyboardInterrupt(f"signal {signum}")
-        _note(f"signal {signum} ignored: ending what the tests left running first")
 
     previous = supervisor.set_handlers(stop)
     state.stack.callback(supervisor.restore_handlers, previous)
+
+
+def _pass_on(state: _State, signum: int) -> bool:
+    """The xdist controller: ``signum`` to each local worker still running; any sent?"""
+    from ros_isolated_test.process import proc
+
+    sent = False
+    for _node, pid in state.workers:
+        stat = proc.read_stat(pid)
+        # Still our child, so its PID names no later process (it is not reaped yet).
+        if stat is None or not stat.alive or stat.ppid != os.getpid():
+            continue
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signum)
+            sent = True
+    return sent
+
+
+def _wait_for_workers(state: _State) -> None:
+    """The interrupted xdist controller: until each worker has ended its leftovers.
+
+    That is, until its pytest ended (its channel closed), its ID released; a second
+    signal stops the wait. xdist's teardown, which follows, kills a worker still
+    running 10 s after it began. Each is also told to run no further test, as xdist
+    does when it stops (a test may have swallowed the interrupt).
+    """
+    for node, _pid in state.workers:
+        with contextlib.suppress(Exception):  # gone already: nothing to tell
+            node.shutdown()
+    for node, _pid in state.workers:
+        channel = getattr(node, "channel", None)
+        while channel is not None and not state.hurry and not _closed(channel):
+            pass
+
+
+def _closed(channel: Any) -> bool:
+    """An execnet channel closed within 0.1 s (a signal's handler runs meanwhile)."""
+    try:
+        channel.waitclose(0.1)
+    except channel.TimeoutError:
+        return False
+    except Exception:  # closed with the worker's error, which xdist reports
+        return True
+    return True
 
 
 def _set_environ(env: dict[str, str]) -> None:
@@ -371,22 +450,54 @@ def pytest_testnodedown(node: object, error: object) -> None:
         xml.add_global_property(f"ros_domain_id.{name}", str(output["ros_domain_id"]))
 
 
-@pytest.hookimpl(trylast=True)
-def pytest_sessionfinish(session: pytest.Session) -> None:
-    """The xdist controller: a worker that got no ID makes the run's code the runner's."""
-    state = session.config.stash.get(_STATE, None)
-    if state is None or state.error is None or hasattr(session.config, "workerinput"):
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node: Any) -> None:
+    """The xdist controller: each local worker's PID, to pass a signal on to it."""
+    state = node.config.stash.get(_STATE, None)
+    spec = node.gateway.spec
+    if state is None or not spec.popen or spec.via:
+        return  # nothing to pass on, or a process of another host
+    try:
+        pid = int(node.gateway._rinfo().pid)  # asked by xdist just before: no round trip
+    except Exception:  # an execnet without it: the worker learns of the end from execnet
         return
-    from ros_isolated_test.runner import exit_codes
+    state.workers.append((node, pid))
 
-    _note(state.error.removeprefix("ros-isolated-test: "))
-    session.exitstatus = exit_codes.NO_DOMAIN
+
+@pytest.hookimpl(hookwrapper=True, trylast=True)
+def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]:
+    """Release when the session ends, after the fixtures' teardown, whatever raised in it.
+
+    Not only at unconfigure, which pytest skips when a sessionfinish hook raises: as
+    xdist's does in a worker whose controller is gone (its report cannot be sent). So a
+    worker has released before it reports its end (this wrapper is inside xdist's). An
+    interrupted xdist controller first waits for its workers, before xdist's teardown.
+    """
+    config = session.config
+    state = config.stash.get(_STATE, None)
+    if state is not None and state.interrupted:
+        _wait_for_workers(state)
+    yield
+    if state is None:
+        return
+    if state.error is not None and not hasattr(config, "workerinput"):
+        # The xdist controller: a worker that got no ID makes the run's code the runner's.
+        from ros_isolated_test.runner import exit_codes
+
+        _note(state.error.removeprefix("ros-isolated-test: "))
+        session.exitstatus = exit_codes.NO_DOMAIN
+    _release(state)
 
 
 @pytest.hookimpl(trylast=True)
 def pytest_unconfigure(config: pytest.Config) -> None:
-    """End what the tests left running, block survivors, release: the runner's order."""
+    """Release, if the session never finished (an error before it started)."""
     state = config.stash.get(_STATE, None)
     if state is not None:
-        state.closing = True  # a signal now is only noted
-        state.stack.close()
+        _release(state)
+
+
+def _release(state: _State) -> None:
+    """End what the tests left running, block survivors, release: the runner's order."""
+    state.closing = True  # a signal now is only noted
+    state.stack.close()

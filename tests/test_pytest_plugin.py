@@ -8,18 +8,21 @@ with ``-p no:ros_isolated_test`` fails.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
-from collections.abc import Mapping
+import uuid
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import pytest
 from helpers import capabilities
 from helpers.commands import CLI, HUNG, POLICY_VARS, REPO, start_cli
-from helpers.processes import poll_until, wait_for
+from helpers.processes import carrying, poll_until, wait_for
 from helpers.workspace import crosstalk_workspace
 
 EXAMPLES = REPO / "examples" / "python_tokens"
@@ -633,6 +636,143 @@ def test_a_signal_ends_the_tests_leftovers_before_the_release(
     following = project(tmp_path / "following", NEXT_TEST)
     after = run_pytest(following, {**shared, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}, "test")
     assert after.returncode == 0, after.stdout + after.stderr
+
+
+#: Two tests (one per xdist worker): each starts a long-lived child that ignores SIGINT (a
+#: terminal's Ctrl-C reaches it too: only the sweep's SIGTERM ends it), names it in a file
+#: named after its own process (the worker), then runs on until interrupted.
+RUNNING_TEST = """\
+import os, pathlib, subprocess, sys, time
+import pytest
+
+CHILD = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(300)"
+
+@pytest.mark.parametrize("n", range(2))
+def test_runs_on(n):
+    child = subprocess.Popen([sys.executable, "-c", CHILD])
+    started = pathlib.Path(os.environ["STARTED"])
+    (started / f"{os.getpid()}.new").write_text(str(child.pid))
+    os.rename(started / f"{os.getpid()}.new", started / str(os.getpid()))  # whole, never empty
+    time.sleep(300)
+"""
+
+#: Where a session's processes are found: in their environment, whatever their names.
+MARK_VAR = "RIT_SESSION_MARK"
+
+
+@pytest.fixture
+def session_mark() -> Iterator[str]:
+    """``RIT_SESSION_MARK=<uuid>`` for a session's environment; whatever still carries it
+    when the test ends (it failed) is killed, so nothing of it outlives the test."""
+    entry = f"{MARK_VAR}={uuid.uuid4().hex}"
+    yield entry
+    for pid in carrying(entry):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def running_tests(folder: Path) -> dict[int, int]:
+    """Each running test's process (an xdist worker) and its child, as their files say."""
+    return {int(path.name): int(path.read_text()) for path in folder.glob("[0-9]*[0-9]")}
+
+
+def held_rows(env: Mapping[str, str], cwd: Path) -> list[dict[str, object]]:
+    """``status --json`` rows of the lock directory that hold an ID: a lock or a survivor."""
+    listed = run_in(cwd, env, [CLI, "status", "--json"])
+    assert listed.returncode == 0, listed.stderr
+    rows: list[dict[str, object]] = json.loads(listed.stdout)
+    return [row for row in rows if row["via"] in ("lock", "survivor")]
+
+
+def start_running_tests(
+    tmp_path: Path,
+    env: Mapping[str, str],
+    mark: str,
+    workers: int,
+    into: list[subprocess.Popen[bytes]],
+) -> tuple[subprocess.Popen[bytes], Path, dict[int, int]]:
+    """pytest (``-n workers``, 0: no xdist) on RUNNING_TEST in a ROS package, in a process
+    group of its own, the environment marked; once every test runs: pytest, its log, and
+    each test's process with its child."""
+    started_dir = tmp_path / "started"
+    started_dir.mkdir()
+    name, value = mark.split("=", 1)
+    session_env = {**env, "STARTED": str(started_dir), name: value}
+    root = project(tmp_path / "pkg", RUNNING_TEST)
+    log = tmp_path / "pytest.log"
+    xdist = ("-n", str(workers)) if workers else ()
+    with log.open("wb") as out:
+        session = subprocess.Popen(
+            [*PYTEST, *xdist, "test"], cwd=root, env=session_env, stdin=subprocess.DEVNULL,
+            stdout=out, stderr=out, start_new_session=True,
+        )  # fmt: skip
+    into.append(session)
+    expected = max(workers, 1)  # without xdist the tests run one after the other
+    poll_until(
+        lambda: len(running_tests(started_dir)) >= expected,
+        f"{expected} test(s) running, each with its child",
+    )
+    children = running_tests(started_dir)
+    # The control for the checks after: while the tests run, status shows each ID held by
+    # the process that runs its test, and the children are found by the mark.
+    assert {row["pid"] for row in held_rows(env, tmp_path)} == set(children)
+    assert set(children.values()) <= set(carrying(mark))
+    return session, log, children
+
+
+@pytest.mark.parametrize(
+    ("how", "workers"),
+    [
+        ("SIGTERM", 2),
+        ("SIGHUP", 2),
+        ("Ctrl-C", 2),  # the control: SIGINT to the whole process group, as a terminal sends it
+        ("SIGTERM", 0),  # the control: the same signal without xdist
+    ],
+    ids=["sigterm-xdist", "sighup-xdist", "ctrl-c-xdist", "sigterm-no-xdist"],
+)
+def test_a_signal_to_the_xdist_controller_ends_the_workers_as_ctrl_c_does(
+    tmp_path: Path,
+    env: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    session_mark: str,
+    how: str,
+    workers: int,
+) -> None:
+    """SIGTERM or SIGHUP to the controller alone: pytest exits 2, as without xdist, and only
+    after every worker ended its test's child and released its ID: nothing of the session
+    lives on, and status shows nothing held in the session's lock directory."""
+    session, log, children = start_running_tests(tmp_path, env, session_mark, workers, started)
+    if how == "Ctrl-C":
+        os.killpg(session.pid, signal.SIGINT)
+    else:
+        session.send_signal(signal.Signals[how])
+    code = session.wait(HUNG)
+    output = log.read_text()
+    assert code == pytest.ExitCode.INTERRUPTED, output
+    # Nothing of the session lives once pytest has exited: workers, tests' children.
+    assert carrying(session_mark) == [], output
+    for child in children.values():
+        assert f"stopped process {child}" in output, output  # ended by the sweep
+    assert held_rows(env, tmp_path) == [], output
+
+
+def test_xdist_workers_release_when_the_controller_is_killed(
+    tmp_path: Path,
+    env: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    session_mark: str,
+) -> None:
+    """The controller gone (SIGKILL): execnet interrupts each worker (SIGINT), whose report
+    to the controller then fails; the worker has ended its test's child and released its ID
+    before, not in unconfigure, which pytest skips after that failure."""
+    session, log, children = start_running_tests(tmp_path, env, session_mark, 2, started)
+    session.kill()
+    assert session.wait(HUNG) == -signal.SIGKILL
+    poll_until(lambda: carrying(session_mark) == [], "every process of the session ended")
+    output = log.read_text()
+    for child in children.values():
+        assert f"stopped process {child}" in output, output  # ended by the sweep
+    assert held_rows(env, tmp_path) == [], output
 
 
 #: Holds its session open until GO exists (so another runner can try the same resources).

@@ -3,13 +3,13 @@
 launch_testing is in no registry, so it comes from the vendored Jazzy sources in the
 outside tier (``../shared``), and its pytest plugin breaks pytest 9, which the suite's own
 ``.venv`` has: so it lives in an environment of its own, never in ``.venv``. It holds the
-ros extra (read from pyproject.toml, so the two never drift), ``pytest<9``, the vendored
-``launch`` packages (``--no-deps``: their metadata names packages PyPI spells otherwise),
-``launch_testing_ament_cmake`` installed by CMake into its prefix, and this project as an
-editable install of the checkout. An editable install copies no data files, so the CMake
-package is linked in by hand where pip would put it (``share/ros_isolated_test/cmake``
-beside ``bin/ros-isolated-test``): the launch tier finds it in its own prefix, never
-through another environment's.
+ros extra (read from pyproject.toml, so the two never drift), ``pytest<9`` and
+pytest-xdist, the vendored ``launch`` packages (``--no-deps``: their metadata names
+packages PyPI spells otherwise), ``launch_testing_ament_cmake`` installed by CMake into its
+prefix, and this project as an editable install of the checkout. An editable install
+copies no data files, so the CMake package is linked in by hand where pip would put it
+(``share/ros_isolated_test/cmake`` beside ``bin/ros-isolated-test``): the launch tier
+finds it in its own prefix, never through another environment's.
 
 It is built once and kept in ``.venv-launch/`` (git-ignored), keyed by a hash of
 everything it is made of; a change to any of those builds it again. A lock keeps two
@@ -51,6 +51,8 @@ LAUNCH_DEPENDENCIES = (
 )
 #: Below 9: launch_testing's pytest11 plugin uses a hook argument pytest 9 removed.
 PYTEST = "pytest<9"
+#: Launch files under pytest-xdist (tests/test_launch_cases.py): their cases on one worker.
+XDIST = "pytest-xdist"
 
 
 class LaunchEnvError(RuntimeError):
@@ -69,7 +71,7 @@ def _fingerprint() -> str:
     """A hash of what the environment is made of: any change means a rebuild."""
     digest = hashlib.sha256()
     digest.update(sys.version.encode())
-    digest.update("\n".join([*ros_requirements(), *LAUNCH_DEPENDENCIES, PYTEST]).encode())
+    digest.update("\n".join([*ros_requirements(), *LAUNCH_DEPENDENCIES, PYTEST, XDIST]).encode())
     digest.update(Path(__file__).read_bytes())
     for name in (*PYTHON_PACKAGES, "launch_testing_ament_cmake"):
         for path in sorted((LAUNCH_SOURCES / name).rglob("*")):
@@ -98,7 +100,7 @@ def _build(log: Path) -> None:
     _run([sys.executable, "-m", "venv", str(PREFIX)], log)
     pip = [str(PYTHON), "-m", "pip", "install", "-q", "--disable-pip-version-check"]
     _run([*pip, "--upgrade", "pip"], log)
-    _run([*pip, *ros_requirements(), *LAUNCH_DEPENDENCIES, PYTEST], log)
+    _run([*pip, *ros_requirements(), *LAUNCH_DEPENDENCIES, PYTEST, XDIST], log)
     # pip builds the legacy setup.py packages in their own folder: build copies, so the
     # shared sources are never written to.
     with tempfile.TemporaryDirectory(prefix="launch-sources-") as scratch:

@@ -96,6 +96,18 @@ def stat_of(pid: int) -> proc.Stat:
     return found
 
 
+def carrying(entry: str) -> list[int]:
+    """Live processes whose environment holds ``entry`` (``NAME=value``), found whatever
+    their names: how a test finds every process of a session it marked (zombies are dead)."""
+    wanted = entry.encode()
+    found = []
+    for pid in proc.pids():
+        stat = proc.read_stat(pid)
+        if stat is not None and stat.alive and wanted in proc.environ(pid).split(b"\0"):
+            found.append(int(pid))
+    return found
+
+
 def poll_until(condition: Callable[[], bool], what: str, timeout: float = DEADLINE) -> None:
     """Wait until ``condition()`` holds; fail naming ``what`` after ``timeout`` (a hang stopper)."""
     deadline = time.monotonic() + timeout

@@ -1,0 +1,511 @@
+"""launch_testing files under pytest, reported case by case: the one seam with launch_testing.
+
+launch_testing's pytest plugin makes one item per launch file: it runs the launch once
+and folds every ``unittest`` case into one pass or fail. The pytest plugin registers this
+module when launch_testing's plugin is loaded. Right after launch_testing collects a
+file, its one item is replaced by one item per ``unittest`` case of the active and
+post-shutdown tests, named as launch_testing names them (``TestWhileRunning.test_x``,
+with the parameter set of a ``launch_testing.parametrize`` run, ``test_x[a, 1]``). The
+first case of a run to execute launches it with launch_testing's own runner, once per
+parameter set; each case then reports what ``unittest`` recorded for it. A launch that
+cannot start, or stops before its tests finished, is one error; its other cases are
+skipped, none passed.
+
+Everything read of launch_testing is read here, and checked when a file is collected.
+Where launch_testing is not as expected, the file stays the one test launch_testing made,
+with one warning per session: the run goes on as before, never broken. Other collectors
+(launch_pytest's among them) are left alone. With pytest-xdist, a launch file's cases
+are scheduled onto one worker (``pytest_xdist_make_scheduler``).
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import re
+import sys
+import traceback
+import unittest
+from collections.abc import Callable, Generator, Sequence
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+if TYPE_CHECKING:
+    from _pytest._code.code import ExceptionInfo, TerminalRepr, TracebackStyle
+
+#: The name the pytest plugin registers this module under.
+PLUGIN_NAME = "ros_isolated_test.launch_cases"
+#: Packages whose pytest items are launch_testing's (launch_testing_ros subclasses them).
+_LAUNCH_PACKAGES = ("launch_testing", "launch_testing_ros")
+
+PASSED, SKIPPED, XFAILED, XPASSED, FAILED, ERROR = (
+    "passed", "skipped", "xfailed", "xpassed", "failed", "error"
+)  # fmt: skip
+#: Worse later: a case with several records (subtests) reports its worst.
+_RANK = (PASSED, SKIPPED, XFAILED, XPASSED, FAILED, ERROR)
+_HOLDER = re.compile(r"^(setUpClass|setUpModule|tearDownClass|tearDownModule) \((.+)\)$")
+_FRAME = re.compile(r'^\s*File "(.+)", line (\d+)')
+
+
+class LaunchCasesWarning(pytest.PytestWarning):
+    """launch_testing is not as this module knows it: its files stay one test each."""
+
+
+class _Mismatch(Exception):
+    """What of launch_testing differs from what this module reads (for the warning)."""
+
+
+class Verdict:
+    """One case's outcome: its kind, its message and its full text (a traceback)."""
+
+    def __init__(self, kind: str, message: str = "", text: str = "") -> None:
+        self.kind = kind
+        self.message = message
+        self.text = text
+
+    def worse(self, other: Verdict) -> Verdict:
+        """The worse of the two, the texts of both kept (subtests fail one case)."""
+        first, second = (self, other) if _RANK.index(self.kind) >= _RANK.index(other.kind) else (
+            other, self)  # fmt: skip
+        text = "\n".join(part for part in (first.text, second.text) if part)
+        return Verdict(first.kind, first.message, text)
+
+
+class _Run:
+    """One launch of a file (one parameter set): its cases' verdicts once launched."""
+
+    def __init__(self, index: int, label: str, size: int) -> None:
+        self.index = index
+        self.label = label
+        self.size = size
+        #: By case position; None until launched, or when the launch as a whole failed.
+        self.verdicts: list[Verdict] | None = None
+        #: Errors after a case (a tearDownClass that failed), by case position.
+        self.after: dict[int, list[str]] = {}
+        #: The launch's own outcome when its cases have none of their own.
+        self.whole: Verdict | None = None
+        #: The case that reports ``whole``: the first to ask.
+        self.carrier: str | None = None
+        #: Cases that got their verdict from this launch (a second ask launches again).
+        self.reported: set[str] = set()
+
+
+class LaunchFile:
+    """A launch file's runs, each launched once when its first case runs."""
+
+    def __init__(
+        self, item: pytest.Item, runs: list[Any], sizes: list[int], runner: Callable[..., Any]
+    ) -> None:
+        self._config = item.config
+        self._path = item.path
+        self._runs = runs
+        self._runner = runner
+        pairs = enumerate(zip(runs, sizes, strict=True))
+        self.runs = [_Run(i, str(run), size) for i, (run, size) in pairs]
+        #: A run whose launch stopped early: later runs are not launched (launch_testing's
+        #: own rule: most likely a Ctrl-C).
+        self.stopped: _Run | None = None
+
+    def verdict(self, case: LaunchCase) -> tuple[Verdict, list[str]]:
+        """``case``'s verdict and the errors after it, launching its run if needed."""
+        run = self.runs[case.run]
+        if (run.verdicts is None and run.whole is None) or case.nodeid in run.reported:
+            self._launch(run)  # first ask, or a rerun of a case (pytest-rerunfailures)
+        run.reported.add(case.nodeid)
+        if run.whole is not None:
+            if run.carrier is None or run.carrier == case.nodeid:
+                run.carrier = case.nodeid
+                return run.whole, []
+            return Verdict(SKIPPED, _together(run, run.carrier)), []
+        assert run.verdicts is not None
+        return run.verdicts[case.case], run.after.get(case.case, [])
+
+    def _launch(self, run: _Run) -> None:
+        """Launch one run with launch_testing's runner and read its result case by case."""
+        run.verdicts, run.after, run.whole, run.carrier = None, {}, None, None
+        run.reported = set()
+        if self.stopped is not None and self.stopped is not run:
+            message = (
+                f"not launched: the launch {self.stopped.label} stopped before its tests "
+                "finished (launch_testing launches no later parameter set then)"
+            )
+            run.verdicts = [Verdict(SKIPPED, message)] * run.size
+            return
+        self.stopped = None
+        test_run = copy.deepcopy(self._runs[run.index])  # as launch_testing: a rerun is fresh
+        cases = list(test_run.all_cases())  # before unittest may let go of them
+        given: list[list[str]] = self._config.getoption("--launch-args", default=None) or []
+        arguments = [argument for group in given for argument in group]
+        try:
+            runner = self._runner(
+                test_runs=[test_run],
+                launch_file_arguments=arguments,
+                debug=self._config.getoption("verbose"),
+            )
+            runner.validate()
+            results = runner.run()
+        except Exception as error:  # the file's own code failed: its description, a check
+            text = "".join(traceback.format_exception(error))
+            message = f"the launch could not start: {type(error).__name__}: {error}"
+            run.whole = Verdict(ERROR, message, text)
+            self.stopped = run
+            return
+        result: Any = results.get(test_run) if len(results) != 1 else next(iter(results.values()))
+        if isinstance(result, _fail_result_type()):
+            said = _texts(result.failures[:1]).strip()
+            run.whole = Verdict(ERROR, _STOPPED, f"{_STOPPED}\nlaunch_testing: {said}")
+            self.stopped = run
+            return
+        try:
+            run.verdicts, run.after = _read(cases, result)
+        except Exception as error:  # as launch_testing reports it: one result for the run
+            reason = str(error) if isinstance(error, _Mismatch) else repr(error)
+            _warn_once(self._config, self._path, reason, _ONE_PER_RUN)
+            run.whole = _as_one(result)
+
+
+_STOPPED = (
+    "the launch stopped before its active tests finished: it never got ready to test "
+    "(ReadyToTest within its timeout) or its processes ended first (launch_testing's "
+    "output is in the captured stdout)"
+)
+
+
+def _as_one(result: Any) -> Verdict:
+    """A run's result read as launch_testing's own item reads it: passed or not."""
+    succeeded = getattr(result, "wasSuccessful", None)
+    if callable(succeeded) and succeeded():
+        return Verdict(PASSED)
+    records = [*getattr(result, "errors", []), *getattr(result, "failures", [])]
+    text = _texts(records) if records else f"launch_testing's result: {result!r}"
+    return Verdict(FAILED, "some test cases have failed", text)
+
+
+def _together(run: _Run, carrier: str) -> str:
+    """Why a case of a run with one outcome for all reports nothing of its own."""
+    if run.whole is not None and run.whole.kind == ERROR:
+        return f"not run: its launch ({run.label}) failed, the one error is on {carrier}"
+    return f"reported with {carrier}: launch_testing's result was not read case by case"
+
+
+def _texts(entries: Sequence[tuple[Any, str]]) -> str:
+    """The texts of several records (unittest's), each under its case's name when more than one."""
+    if len(entries) == 1:
+        return str(entries[0][1])
+    return "\n".join(f"{test}:\n{text}" for test, text in entries)
+
+
+def _fail_result_type() -> type[Any]:
+    """launch_testing's result for a launch that stopped early (checked at collection)."""
+    import importlib
+
+    try:
+        found = getattr(importlib.import_module("launch_testing.test_result"), "FailResult", None)
+    except ImportError:
+        found = None
+    if not isinstance(found, type):
+        raise _Mismatch("launch_testing.test_result.FailResult is missing")
+    return found
+
+
+def _read(
+    cases: Sequence[unittest.TestCase], result: Any
+) -> tuple[list[Verdict], dict[int, list[str]]]:
+    """What ``unittest`` recorded for each of a run's ``cases``, by their position."""
+    missing = [name for name in ("testCases", "errors", "failures", "skipped")
+               if not hasattr(result, name)]  # fmt: skip
+    if missing:
+        raise _Mismatch(f"its test result has no {', '.join(missing)}")
+    where = {id(case): i for i, case in enumerate(cases)}
+    ran = {where[id(case)] for case in result.testCases if id(case) in where}
+    found: dict[int, Verdict] = {}
+    loose: list[tuple[str, str, str]] = []  # (kind, description, text): setUpClass, ...
+
+    def record(test: object, verdict: Verdict) -> None:
+        index = where.get(id(test), where.get(id(getattr(test, "test_case", None))))
+        if index is None:
+            loose.append((verdict.kind, str(test), verdict.text))
+        else:
+            found[index] = found[index].worse(verdict) if index in found else verdict
+
+    for kind, entries in ((ERROR, result.errors), (FAILED, result.failures)):
+        for test, text in entries:
+            record(test, Verdict(kind, _message(text), text))
+    for test, reason in result.skipped:
+        record(test, Verdict(SKIPPED, reason))
+    for test, text in getattr(result, "expectedFailures", []):
+        record(test, Verdict(XFAILED, _message(text) or "expected failure", text))
+    for test in getattr(result, "unexpectedSuccesses", []):
+        record(test, Verdict(XPASSED, "unexpected success: marked expectedFailure, it passed"))
+    after: dict[int, list[str]] = {}
+    for kind, description, text in loose:
+        owned = _owned(cases, description)
+        not_run = [i for i in owned if i not in ran and i not in found]
+        for i in not_run:
+            found[i] = Verdict(kind, f"{description}: {_message(text) or text}", text)
+        if not not_run and kind == ERROR and owned:
+            after.setdefault(owned[-1], []).append(f"{description}:\n{text}")
+    verdicts = []
+    for i in range(len(cases)):
+        if i in found:
+            verdicts.append(found[i])
+        elif i in ran:
+            verdicts.append(Verdict(PASSED))
+        else:
+            verdicts.append(Verdict(ERROR, "launch_testing recorded no result for this case"))
+    return verdicts, after
+
+
+def _owned(cases: Sequence[unittest.TestCase], description: str) -> list[int]:
+    """The cases a class or module fixture's record is about (all of them when unsure)."""
+    match = _HOLDER.match(description)
+    if match is not None:
+        scope = match.group(2)
+        owned = [i for i, case in enumerate(cases) if case.id().startswith(f"{scope}.")]
+        if owned:
+            return owned
+    return list(range(len(cases)))
+
+
+def _message(text: str) -> str:
+    """The exception a formatted traceback ends with (all of ``text`` if it is none)."""
+    lines = text.rstrip().splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith("Traceback (")]
+    if not starts:
+        return text.strip()
+    rest = lines[starts[-1] + 1 :]
+    while rest and rest[0].startswith(" "):
+        rest = rest[1:]
+    return "\n".join(rest).strip() or text.strip()
+
+
+def _crash_site(text: str, path: str, lineno: int) -> tuple[str, int]:
+    """The last frame a traceback names, else the case's own place."""
+    frames = [_FRAME.match(line) for line in text.splitlines()]
+    last = [match for match in frames if match is not None]
+    return (last[-1].group(1), int(last[-1].group(2))) if last else (path, lineno)
+
+
+class _Reported(Exception):
+    """A case's failure or error as ``unittest`` wrote it; shown as that text."""
+
+    def __init__(self, verdict: Verdict) -> None:
+        super().__init__(verdict.message)
+        self.verdict = verdict
+
+
+class LaunchCase(pytest.Item):
+    """One ``unittest`` case of a launch file: its launch's first case to run starts it."""
+
+    def __init__(
+        self, *, launch: LaunchFile, run: int, case: int, line: int, **kwargs: Any
+    ) -> None:
+        super().__init__(**kwargs)
+        self.launch = launch
+        self.run = run
+        self.case = case
+        self.line = line
+        self._verdict = Verdict(ERROR, "not run")
+        self._after: list[str] = []
+
+    def setup(self) -> None:
+        """Launch (first case of its run), then an error or a skip is reported at setup."""
+        self._verdict, self._after = self.launch.verdict(self)
+        if self._verdict.kind == ERROR:
+            raise _Reported(self._verdict)
+        if self._verdict.kind == SKIPPED:
+            raise pytest.skip.Exception(self._verdict.message, _use_item_location=True)
+
+    def runtest(self) -> None:
+        if self._verdict.kind in (FAILED, XPASSED):
+            raise _Reported(self._verdict)
+        if self._verdict.kind == XFAILED:
+            pytest.xfail(self._verdict.message)
+
+    def teardown(self) -> None:
+        """A class or module fixture that failed after this, its class's last case."""
+        after, self._after = self._after, []
+        if after:
+            text = "\n".join(after)
+            raise _Reported(Verdict(ERROR, _message(text), text))
+
+    def repr_failure(
+        self, excinfo: ExceptionInfo[BaseException], style: TracebackStyle | None = None
+    ) -> str | TerminalRepr:
+        if isinstance(excinfo.value, _Reported):
+            return self._shown(excinfo.value.verdict)
+        return super().repr_failure(excinfo, style)
+
+    def _repr_failure_py(
+        self, excinfo: ExceptionInfo[BaseException], style: TracebackStyle | None = None
+    ) -> TerminalRepr:
+        """Setup and teardown errors: pytest shows them through this, not repr_failure."""
+        if isinstance(excinfo.value, _Reported):
+            return self._shown(excinfo.value.verdict)
+        return super()._repr_failure_py(excinfo, style)
+
+    def _shown(self, verdict: Verdict) -> TerminalRepr:
+        """The text unittest wrote, and its last line (the exception) as the short message."""
+        from _pytest._code.code import ExceptionChainRepr, ReprFileLocation, ReprTracebackNative
+
+        text = verdict.text or verdict.message
+        path, lineno = _crash_site(text, str(self.path), self.line)
+        lines = [f"{line}\n" for line in text.rstrip("\n").splitlines()]
+        crash = ReprFileLocation(path, lineno, verdict.message or _message(text))
+        return ExceptionChainRepr([(ReprTracebackNative(lines), crash, None)])
+
+    def reportinfo(self) -> tuple[Any, int | None, str]:
+        """Marked as pytest marks doctests: ``-v`` then shows the node ID as it is."""
+        return self.path, self.line - 1 if self.line else None, f"[launch_testing] {self.name}"
+
+
+def _cases(item: pytest.Item) -> list[LaunchCase]:
+    """launch_testing's one item of a file as one item per case; _Mismatch if it cannot be."""
+    runs = getattr(item, "test_runs", None)
+    runner = getattr(item, "runner_cls", None)
+    if not isinstance(runs, list) or not runs:
+        raise _Mismatch("its test item has no list of test runs (test_runs)")
+    if not callable(runner):
+        raise _Mismatch("its test item has no runner class (runner_cls)")
+    try:
+        inspect.signature(runner).bind(test_runs=[], launch_file_arguments=[], debug=0)
+    except (TypeError, ValueError) as error:
+        raise _Mismatch(f"its runner takes other arguments ({error})") from None
+    for name in ("validate", "run"):
+        if not callable(getattr(runner, name, None)):
+            raise _Mismatch(f"its runner has no {name}()")
+    _fail_result_type()
+    cases = [_run_cases(run) for run in runs]
+    launch = LaunchFile(item, runs, [len(of_run) for of_run in cases], runner)
+    parent = item.parent
+    assert parent is not None
+    made: list[LaunchCase] = []
+    for index, of_run in enumerate(cases):
+        for position, case in enumerate(of_run):
+            made.append(LaunchCase.from_parent(
+                parent, name=_name(case), launch=launch, run=index, case=position,
+                line=_line(case),
+            ))  # fmt: skip
+    names = [case.name for case in made]
+    twice = sorted({name for name in names if names.count(name) > 1})
+    if twice:
+        raise _Mismatch(f"two cases are named {twice[0]}")
+    return made
+
+
+def _run_cases(run: Any) -> list[unittest.TestCase]:
+    all_cases = getattr(run, "all_cases", None)
+    if not callable(all_cases):
+        raise _Mismatch("its test runs have no all_cases()")
+    cases = list(all_cases())
+    if not all(isinstance(case, unittest.TestCase) for case in cases):
+        raise _Mismatch("its test runs hold other things than unittest cases")
+    return cases
+
+
+def _name(case: unittest.TestCase) -> str:
+    """launch_testing's name of a case: its unittest id without the module."""
+    module = f"{type(case).__module__}."
+    whole = case.id()
+    return whole[len(module) :] if whole.startswith(module) else whole
+
+
+def _line(case: unittest.TestCase) -> int:
+    """The line the case's method starts on (0: unknown)."""
+    method = getattr(case, case._testMethodName, None)
+    try:
+        code = inspect.unwrap(method).__code__  # type: ignore[arg-type]
+    except (AttributeError, TypeError, ValueError):
+        return 0
+    return int(code.co_firstlineno)
+
+
+def _from_launch_testing(node: object) -> bool:
+    return type(node).__module__.split(".")[0] in _LAUNCH_PACKAGES
+
+
+_WARNED = pytest.StashKey[bool]()
+_ONE_PER_FILE = "its launch files are reported as one test each"
+_ONE_PER_RUN = "each launch's result is reported on its first case"
+
+
+def _warn_once(config: pytest.Config, where: object, reason: str, instead: str) -> None:
+    """One warning a session, at ``where`` (a path): launch_testing differs, and so what."""
+    if config.stash.get(_WARNED, False):
+        return
+    config.stash[_WARNED] = True
+    message = (
+        f"ros-isolated-test: {_launch_testing_version()} is not as expected ({reason}): "
+        f"{instead}, as launch_testing reports them"
+    )
+    import warnings
+
+    try:
+        warnings.warn_explicit(LaunchCasesWarning(message), None, str(where), 0)
+    except Exception:  # -W error, or anything else: said all the same, the run goes on
+        print(message, file=sys.stderr, flush=True)
+
+
+def _launch_testing_version() -> str:
+    from importlib import metadata
+
+    try:
+        return f"launch_testing {metadata.version('launch_testing')}"
+    except metadata.PackageNotFoundError:
+        return "launch_testing"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector: pytest.Collector) -> Generator[None, Any, None]:
+    """launch_testing's one item of a launch file, replaced by its cases."""
+    outcome = yield
+    report = outcome.get_result()
+    if report.outcome != "passed" or not _from_launch_testing(collector):
+        return
+    result: list[pytest.Item | pytest.Collector] = []
+    for node in report.result:
+        if isinstance(node, pytest.Item) and _from_launch_testing(node):
+            try:
+                result.extend(_cases(node) or [node])
+            except _Mismatch as mismatch:
+                _warn_once(node.config, node.path, str(mismatch), _ONE_PER_FILE)
+                result.append(node)
+            except Exception as error:  # whatever else it is: never break collection
+                reason = f"{type(error).__name__}: {error}"
+                _warn_once(node.config, node.path, reason, _ONE_PER_FILE)
+                result.append(node)
+        else:
+            result.append(node)
+    report.result = result
+
+
+def launch_scope(nodeid: str) -> str | None:
+    """The file of a launch case's node ID (``file.py::Class.method[...]``), else None.
+
+    No pytest test function or class has a dot in its name; a launch case does (and so do
+    doctests, kept together per file too, which costs nothing).
+    """
+    path, separator, name = nodeid.partition("::")
+    if separator and "::" not in name and "." in name.partition("[")[0]:
+        return path
+    return None
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """Under xdist's load, loadgroup and worksteal: a launch file's cases as one unit of work.
+
+    loadscope and loadfile keep a file on one worker already; ``each`` runs all of it on
+    every worker. Everything else is scheduled one test at a time, as ``load`` does (with
+    loadgroup, ``xdist_group`` groups as ever).
+    """
+    if config.getvalue("dist") not in ("load", "loadgroup", "worksteal"):
+        return None
+    from xdist.scheduler import LoadGroupScheduling  # type: ignore[import-untyped]
+
+    class LaunchFilesTogether(LoadGroupScheduling):  # type: ignore[misc]
+        def _split_scope(self, nodeid: str) -> str:
+            return launch_scope(nodeid) or super()._split_scope(nodeid)
+
+    return LaunchFilesTogether(config, log)
