@@ -479,7 +479,7 @@ def test_no_runner_is_a_configure_error_naming_the_fix_and_the_opt_out(
     message = " ".join(done.stderr.split())
     assert "ros_isolated_test (CMAKE_PROJECT_INCLUDE): cannot isolate the tests of tiny:" in message
     assert f"'{missing} runner-path' did not print the path of the RUNNER" in message, message
-    assert "pip install ros-isolated-test" in message, message
+    assert "see Install it in its README" in message, message
     assert "configure without it: -DROS_ISOLATED_TEST_ALL=OFF" in message, message
     # The way out it names works.
     _configured(source, tmp_path / "build", env, "-DROS_ISOLATED_TEST_ALL=OFF")
@@ -601,3 +601,31 @@ def test_an_installed_wheel_prints_its_own_include(tmp_path: Path, env: dict[str
         "(share/ros_isolated_test/cmake/ros_isolated_test_project_include.cmake beside this "
         "package); reinstall ros-isolated-test with pip"
     ], broken.stderr
+
+
+def test_a_package_with_an_old_minimum_version_is_isolated_too(
+    tmp_path: Path, env: dict[str, str], include_file: str, runner_script: str
+) -> None:
+    """Our functions run under the package's own policies: one that asks for CMake 3.0
+    (no IN_LIST, CMP0057) configures and is isolated; the control asks for 3.15."""
+    body = "find_package(ament_cmake REQUIRED)\nament_add_test(t COMMAND true)\n"
+    for minimum in ("3.0", "3.15"):
+        source = _package(tmp_path / f"src-{minimum}", body, minimum=minimum)
+        build = tmp_path / f"build-{minimum}"
+        _configured(source, build, env, f"-DCMAKE_PROJECT_INCLUDE={include_file}")
+        assert runners_of(build / "CTestTestfile.cmake") == {"t": runner_script}
+
+
+def test_a_build_without_tests_needs_no_runner(
+    tmp_path: Path, env: dict[str, str], include_file: str, runner_script: str
+) -> None:
+    """BUILD_TESTING=OFF: nothing to isolate, so nothing found or said, and no runner
+    needed; the control, with tests, says its line."""
+    body = "find_package(ament_cmake REQUIRED)\n"
+    source = _package(tmp_path / "src", body)
+    include = f"-DCMAKE_PROJECT_INCLUDE={include_file}"
+    off = _configured(source, tmp_path / "off", env, include, "-DBUILD_TESTING=OFF")
+    assert "ros_isolated_test:" not in off.stdout, off.stdout
+    assert not any(e.startswith("ros_isolated_test_DIR:") for e in _cache(tmp_path / "off"))
+    on = _configured(source, tmp_path / "on", env, include)
+    assert ISOLATED.findall(on.stdout) == [("tiny", runner_script)], on.stdout

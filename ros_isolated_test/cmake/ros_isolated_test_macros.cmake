@@ -81,11 +81,15 @@ endfunction()
 # ${missing} (cmake_parse_arguments' KEYWORDS_MISSING_VALUES: "RERUNS" with no value).
 function(_ros_isolated_test_env var missing reruns resources)
   set(_env "")
-  if(NOT reruns STREQUAL "" OR "RERUNS" IN_LIST missing)
+  # list(FIND), not IN_LIST: a package whose cmake_minimum_required is below 3.3 runs
+  # these functions under its own policies (the zero-edit include), without CMP0057.
+  list(FIND missing "RERUNS" _reruns_missing)
+  list(FIND missing "RESOURCES" _resources_missing)
+  if(NOT reruns STREQUAL "" OR NOT _reruns_missing EQUAL -1)
     _ros_isolated_test_check_reruns("${reruns}")
     list(APPEND _env "ROS_ISOLATED_TEST_RERUNS=${reruns}")
   endif()
-  if(NOT resources STREQUAL "" OR "RESOURCES" IN_LIST missing)
+  if(NOT resources STREQUAL "" OR NOT _resources_missing EQUAL -1)
     _ros_isolated_test_check_resources("${resources}")
     list(APPEND _env "ROS_ISOLATED_TEST_RESOURCES=${resources}")
   endif()

@@ -122,11 +122,13 @@ class RunRequest:
 
         An argument names it when it is that path, or ends in it after ``=`` or ``:``
         (``--junit-xml=PATH``, ``--gtest_output=xml:PATH``, as ament passes it); paths
-        are compared made absolute, so ``./r.xml`` names ``r.xml``.
+        are compared made absolute, so ``./r.xml`` names ``r.xml``. The new path is given
+        absolute: a test that changes directory still writes where the runner reads.
         """
         if self.result_file is None:
             return self.command
         wanted = os.path.abspath(self.result_file)
+        own_result = Path(os.path.abspath(own_result))
         command = list(self.command)
         for index, word in enumerate(command):
             if not word.endswith(self.result_file.name):
