@@ -343,6 +343,24 @@ def startup_seconds(env: Mapping[str, str], reps: int, reexec: bool) -> float:
     return median(times)
 
 
+def parse_importtime(lines: Sequence[str]) -> list[tuple[int, str, int, int]]:
+    """Parse ``-X importtime`` lines into (level, module, self µs, cumulative µs).
+
+    A line reads ``import time: SELF | CUMULATIVE | <two spaces per level>NAME``.
+    """
+    parsed = []
+    for line in lines:
+        if not line.startswith("import time:") or "imported package" in line:
+            continue
+        fields = line.split(":", 1)[1].split("|")
+        if len(fields) != 3:
+            continue
+        self_us, cumulative, name = fields
+        level = (len(name) - len(name.lstrip(" ")) - 1) // 2
+        parsed.append((level, name.strip(), int(self_us), int(cumulative)))
+    return parsed
+
+
 @dataclass
 class Section:
     """One benchmark's part of the report: a table, then notes under it."""

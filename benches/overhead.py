@@ -30,6 +30,7 @@ from common import (
     interleaved,
     median,
     ms,
+    parse_importtime,
     progress,
     quotient,
     ratio,
@@ -89,24 +90,6 @@ class ImportEdge:
     importer: str
 
 
-def _importtime(lines: list[str]) -> list[tuple[int, str, int, int]]:
-    """Parse ``-X importtime`` lines into (level, module, self µs, cumulative µs).
-
-    A line reads ``import time: SELF | CUMULATIVE | <two spaces per level>NAME``.
-    """
-    parsed = []
-    for line in lines:
-        if not line.startswith("import time:") or "imported package" in line:
-            continue
-        fields = line.split(":", 1)[1].split("|")
-        if len(fields) != 3:
-            continue
-        self_us, cumulative, name = fields
-        level = (len(name) - len(name.lstrip(" ")) - 1) // 2
-        parsed.append((level, name.strip(), int(self_us), int(cumulative)))
-    return parsed
-
-
 @dataclass(frozen=True)
 class ImportProfile:
     """Our runner's imports: outside modules by first importer, our own modules, the total."""
@@ -133,7 +116,7 @@ def import_profile(ctx: Context, reps: int) -> ImportProfile:
         text=True,
         check=False,
     )
-    preloaded = {name for _, name, _, _ in _importtime(startup.stderr.splitlines())}
+    preloaded = {name for _, name, _, _ in parse_importtime(startup.stderr.splitlines())}
     edges: dict[ImportEdge, list[float]] = defaultdict(list)
     own: dict[str, list[float]] = defaultdict(list)
     own_totals: list[float] = []
@@ -148,7 +131,7 @@ def import_profile(ctx: Context, reps: int) -> ImportProfile:
             text=True,
             check=False,
         )
-        entries = [e for e in _importtime(proc.stderr.splitlines()) if e[1] not in preloaded]
+        entries = [e for e in parse_importtime(proc.stderr.splitlines()) if e[1] not in preloaded]
         # -X importtime prints children before their parent: walk backwards with a stack.
         stack: list[tuple[int, str]] = []
         own_us = 0

@@ -54,6 +54,9 @@ SHORT_NAME_LIMIT = 64
 #: test suites whose own counts are kept: more only in a hostile file.
 MAX_OUTCOMES = 16
 MAX_SUITES = 10_000
+#: Properties kept per suite: ours writes a few dozen.
+MAX_PROPERTIES = 256
+_PROPERTY_KEYS = frozenset({"name", "value"})
 #: Elements nested deeper than this stop reading. Real producers nest four or five levels
 #: (testsuites, testsuite, testcase, failure); the parser keeps a few words per open
 #: element, so an unbounded depth costs memory in proportion to the file.
@@ -63,6 +66,7 @@ _CASE_KEYS = frozenset({"name", "classname", "time", "status", "result"})
 _OUTCOME_KEYS = frozenset({"message", "type"})
 
 _ATTEMPT_TAGS = frozenset({"rerunFailure", "rerunError", "flakyFailure", "flakyError"})
+_IN_PROPERTIES = ["testsuite", "properties"]
 OUTCOME_TAGS = frozenset({"failure", "error", "skipped"}) | _ATTEMPT_TAGS
 #: A character reference, unless it is one of the many that are legal at a glance (32 to
 #: 49999, 0x20 to 0xCFFF): those pass in C, not through a Python call each.
@@ -72,31 +76,29 @@ _CHAR_REF = re.compile(
     r"(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));"
 )
 _OPEN_CHAR_REF = re.compile(r"&#x?[0-9a-fA-F]{0,10}$")
-#: Markup that declares a DTD or entities: never allowed to reach the parser.
+#: Markup that declares a DTD or entities after the prolog: made inert text.
 _DTD_MARKUP = re.compile(r"<!(?=DOCTYPE|ENTITY|ELEMENT|ATTLIST|NOTATION)")
-#: A DOCTYPE's internal entities are expanded, as text, when they are small: the prolog
-#: is looked at up to PROLOG_LIMIT characters, one entity's text may reach ENTITY_LIMIT
-#: characters (nesting ENTITY_DEPTH deep) and all expansions in one file ENTITY_BUDGET.
-#: Beyond those (an entity bomb), and for external entities, which are never read, an
-#: entity stays undefined: the file reads as damaged at its first use of it.
-PROLOG_LIMIT = 64 * 1024
-ENTITY_LIMIT = 4096
+#: The first DOCTYPE reaches the parser, which expands its internal entities (see
+#: :func:`new_parser`), when it ends within this many characters and the parser reads
+#: it; otherwise it is dropped, and a file using its entities reads as damaged there.
+DOCTYPE_LIMIT = 64 * 1024
+#: What entities may add to the text and markup the parser reports: ENTITY_BUDGET
+#: characters, and beyond that EXPANSION_FACTOR times what the parser was given. That
+#: is libxml2's own bound since 2.11; older ones (Ubuntu 24.04's 2.9.14) stream an entity
+#: bomb through a target parser in bounded memory, but for as long as it expands.
 ENTITY_BUDGET = 1024 * 1024
-ENTITY_DEPTH = 32
-_ENTITY_NAME = r"[A-Za-z_:][A-Za-z0-9._:-]{0,63}"
-#: An entity declaration up to its value; group 1 marks a parameter entity.
-_ENTITY_HEAD = re.compile(rf"<!ENTITY[ \t\r\n]+(%[ \t\r\n]+)?({_ENTITY_NAME})[ \t\r\n]+")
-#: Where a scan of a DOCTYPE (before its internal subset) or of one declaration stops.
+EXPANSION_FACTOR = 5
+#: Where the scan for a DOCTYPE's end stops: in its head, in its internal subset, in
+#: one markup declaration.
 _DOCTYPE_MARK = re.compile("[\"'\\[>]")
+_SUBSET_MARK = re.compile("[\"'<\\]]")
 _DECLARATION_MARK = re.compile("[\"'>]")
-_SUBSET_MARK = re.compile("[<\\]]")
-_ENTITY_REFERENCE = re.compile(rf"&({_ENTITY_NAME});")
-_OPEN_ENTITY_REFERENCE = re.compile(rf"&(?:{_ENTITY_NAME})?$")
-_LEGAL_CHAR_REF = re.compile(r"&#(?:x([0-9a-fA-F]{1,8})|([0-9]{1,10}));")
-_PREDEFINED = {"amp": "&", "lt": "<", "gt": ">", "quot": '"', "apos": "'"}
-_ESCAPED = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&apos;"})
-#: Where the prolog scan stops inside a DOCTYPE: a tag, or a quoted literal to skip.
-_PROLOG_MARK = re.compile("[<\"']")
+#: How libxml2 says it stopped expanding an entity: too far (2.11 and later), in a loop,
+#: too deeply nested (2.11 and later; before, a loop too).
+_ENTITY_BOMB = re.compile(
+    r"entity amplification|entity reference loop|entity nesting depth", re.IGNORECASE
+)
+DOCTYPE_REMOVED = "a DOCTYPE was removed: no DTD or external entity is ever loaded"
 _ENCODING = re.compile(rb"""^<\?xml[^>]*encoding\s*=\s*["']([A-Za-z0-9._-]+)["']""")
 _counts = threading.local()
 
@@ -150,6 +152,9 @@ class RawSuite:
     attrs: dict[str, str]
     system_out: str = ""
     system_err: str = ""
+    #: Its ``<property>`` elements (the runner's record of how it ran the test: the
+    #: report's timeline), the first MAX_PROPERTIES, values bounded like attributes.
+    properties: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -253,8 +258,8 @@ def _local(tag: str) -> str:
     return tag.rsplit("}", 1)[-1]
 
 
-class _TooDeep(Exception):
-    """Raised from the parser's start event: lxml stops the parser and re-raises it."""
+class _Stop(Exception):
+    """Raised from a parser event, with the problem: lxml stops the parser and re-raises it."""
 
 
 class _Builder:
@@ -278,11 +283,33 @@ class _Builder:
         self.root_closed = False
         self.dropped_outcomes = 0
         self.dropped_suites = 0
+        #: Characters given to the parser, and reported by it as names, attribute values
+        #: and text: without entities never more than given. Counted only once a DOCTYPE
+        #: reached the parser: without one, no entity can expand.
+        self.fed = 0
+        self.reported = 0
+        self.count_expansion = False
+
+    def _report(self, size: int) -> None:
+        """Count what the parser reported; stop once entities added too much to it."""
+        self.reported += size
+        added = self.reported - self.fed
+        if added > ENTITY_BUDGET and added > EXPANSION_FACTOR * self.fed:
+            raise _Stop(
+                f"entity references expand to over {EXPANSION_FACTOR} times what the file "
+                "holds (an entity bomb?): reading stopped there"
+            )
 
     def start(self, tag: str, attrib: object) -> None:
         if len(self.stack) >= MAX_DEPTH:
-            raise _TooDeep
+            raise _Stop(
+                f"elements nest deeper than {MAX_DEPTH} levels: not a result file; "
+                "reading stopped there"
+            )
         name = _local(tag)
+        if self.count_expansion:
+            values = cast("dict[str, str]", attrib).values()
+            self._report(len(name) + 2 + sum(map(len, values)))
         self.stack.append(name)
         if len(self.stack) == 1:
             self.result.root_attrs = self.budget.attrs(attrib)
@@ -296,6 +323,8 @@ class _Builder:
                 self.result.suites.append(suite)
             else:
                 self.dropped_suites += 1
+        elif name == "property" and self.case is None and self.stack[-3:-1] == _IN_PROPERTIES:
+            self._property(attrib)
         elif name == "testcase" and self.case is None and not self.in_counted_case:
             self._start_case(attrib)
         elif self.in_counted_case and parent == "testcase" and name in OUTCOME_TAGS:
@@ -310,6 +339,14 @@ class _Builder:
                 self.attempt_output = self.budget.text(self.further)
         elif self.case is None and parent == "testsuite" and name in ("system-out", "system-err"):
             self.text = self.budget.text()
+
+    def _property(self, attrib: object) -> None:
+        properties = self.suites[-1].properties if self.suites else None
+        if properties is None or len(properties) >= MAX_PROPERTIES:
+            return
+        attrs = self.budget.attrs(attrib, _PROPERTY_KEYS)
+        if "name" in attrs:
+            properties.setdefault(attrs["name"], attrs.get("value", ""))
 
     def _start_case(self, attrib: object) -> None:
         suite_name = self.suites[-1].name if self.suites else ""
@@ -331,6 +368,8 @@ class _Builder:
         self.text = self.budget.text(self.further)
 
     def data(self, data: str | bytes) -> None:
+        if self.count_expansion:
+            self._report(len(data))
         target = self.attempt_output or self.text
         if target is not None:
             target.add(data if isinstance(data, str) else data.decode("utf-8", "replace"))
@@ -520,7 +559,6 @@ class _Markup:
         self.section = 0
         self.dropped_attributes = 0
         self.damage: str | None = None
-        self.entities = _Entities()
 
     def feed(self, text: str, final: bool) -> str:
         """The next sanitised piece, bounded; ``final`` flushes what was held back."""
@@ -556,7 +594,7 @@ class _Markup:
             start = pos
             plain = _PLAIN.match(text, start)
             assert plain is not None
-            out.append(self.entities.substitute(plain.group()))
+            out.append(plain.group())
             pos = plain.end()
         if start >= len(text):
             return start
@@ -623,7 +661,7 @@ class _Markup:
         found = text.find(self.quote, pos)
         stop = found if found >= 0 else len(text)
         if self.keep_attribute:
-            self.value.add(self.entities.substitute(text[pos:stop]), out)
+            self.value.add(text[pos:stop], out)
         if found < 0:
             return stop
         if self.keep_attribute:
@@ -668,171 +706,28 @@ class _Markup:
         return pos
 
 
-class _Entities:
-    """A DOCTYPE's small internal entities, put into text and attribute values as text.
+def _doctype_end(text: str) -> int:
+    """Past the ``>`` that ends the DOCTYPE ``text`` starts with; -1 if it ends later.
 
-    Producers rarely declare entities, but one that does (a message kept in one place)
-    must not lose its failure's text: without them the parser stops at the first use.
-    The declarations are read from the prolog here, never by the parser, so nothing
-    external is loaded; an entity's markup, if any, is kept as text.
+    Only its extent is looked for, so the parser gets the DOCTYPE whole and nothing of the
+    prolog around it: quoted literals, comments and processing instructions are skipped
+    whole, and what the declarations say is the parser's to read.
     """
-
-    def __init__(self) -> None:
-        self.prolog: list[str] = []
-        self.size = 0
-        self.escaped: dict[str, str] = {}
-        self.used = 0
-        self.over_budget = 0
-
-    def capture(self, text: str) -> None:
-        """Keep prolog text (bounded) to look for declarations once the root starts."""
-        room = PROLOG_LIMIT + 1 - self.size
-        if room > 0 and text:
-            self.prolog.append(text[:room])
-            self.size += min(len(text), room)
-
-    def define(self) -> list[str]:
-        """Expand the declared entities; returns what to report about them."""
-        prolog = "".join(self.prolog)
-        self.prolog = []
-        notes = []
-        if self.size > PROLOG_LIMIT:
-            notes.append(
-                f"the prolog is over {PROLOG_LIMIT} characters: entities declared beyond "
-                "that were not expanded"
-            )
-        literals = _declared_literals(prolog)
-        values: dict[str, str | None] = {}
-        for name in literals:
-            self._expand(name, literals, values, ())
-        self.escaped = {
-            name: value.translate(_ESCAPED) for name, value in values.items() if value is not None
-        }
-        if self.escaped:
-            notes.append(
-                f"{len(self.escaped)} internal entit{'y' if len(self.escaped) == 1 else 'ies'} "
-                f"of the DOCTYPE expanded as text: {', '.join(sorted(self.escaped)[:10])}"
-            )
-        refused = sorted(name for name, value in values.items() if value is None)
-        if refused:
-            notes.append(
-                f"{len(refused)} entit{'y' if len(refused) == 1 else 'ies'} not expanded "
-                f"(over {ENTITY_LIMIT} characters, recursive, nested over {ENTITY_DEPTH} "
-                f"deep, or referring to one not expanded): {', '.join(refused[:10])}"
-            )
-        return notes
-
-    def _expand(
-        self,
-        name: str,
-        literals: dict[str, str | None],
-        values: dict[str, str | None],
-        open_names: tuple[str, ...],
-    ) -> str | None:
-        if name in values:
-            return values[name]
-        literal = literals.get(name)
-        if literal is None or name in open_names or len(open_names) >= ENTITY_DEPTH:
-            values[name] = None
-            return None
-        text = _LEGAL_CHAR_REF.sub(_character, literal)
-        pieces: list[str] = []
-        size, pos = 0, 0
-        for match in _ENTITY_REFERENCE.finditer(text):
-            reference = match.group(1)
-            inner = _PREDEFINED.get(reference)
-            if inner is None:
-                inner = self._expand(reference, literals, values, (*open_names, name))
-            size += match.start() - pos + len(inner or "")
-            if inner is None or size > ENTITY_LIMIT:
-                values[name] = None
-                return None
-            pieces += (text[pos : match.start()], inner)
-            pos = match.end()
-        pieces.append(text[pos:])
-        value = "".join(pieces)
-        values[name] = value if len(value) <= ENTITY_LIMIT else None
-        return values[name]
-
-    def substitute(self, text: str) -> str:
-        """``text`` with each reference to an expanded entity replaced, within the budget."""
-        if not self.escaped or "&" not in text:
-            return text
-        return _ENTITY_REFERENCE.sub(self._one, text)
-
-    def _one(self, match: re.Match[str]) -> str:
-        value = self.escaped.get(match.group(1))
-        if value is None:
-            return match.group()
-        if self.used + len(value) > ENTITY_BUDGET:
-            self.over_budget += 1
-            return match.group()
-        self.used += len(value)
-        return value
-
-
-def _character(match: re.Match[str]) -> str:
-    code = int(match.group(1), 16) if match.group(1) else int(match.group(2))
-    return chr(code) if xml_text.legal(code) else match.group()
-
-
-def _declared_literals(prolog: str) -> dict[str, str | None]:
-    """The general entities declared at the top level of the DOCTYPE's internal subset.
-
-    Scanned as a parser reads it, in linear time: quoted literals, comments and processing
-    instructions are skipped whole, so a declaration inside one defines nothing, nor does
-    one inside a parameter entity, which is never expanded. The five predefined entities
-    are never redefined: the sanitiser's own ``&lt;`` must stay ``<``. ``None``: a value
-    over ENTITY_LIMIT characters, or not ending within the prolog kept.
-    """
-    literals: dict[str, str | None] = {}
-    pos = _internal_subset(prolog)
-    while pos >= 0:
-        mark = _SUBSET_MARK.search(prolog, pos)
-        if mark is None or mark.group() == "]":
-            break
-        start = mark.start()
-        if prolog.startswith(("<!--", "<?"), start):
-            pos = _after(prolog, "-->" if prolog[start + 1] == "!" else "?>", start + 2)
-            continue
-        head = _ENTITY_HEAD.match(prolog, start)
-        pos = head.end() if head else start + 1
-        if head and pos < len(prolog) and prolog[pos] in "\"'":
-            end = prolog.find(prolog[pos], pos + 1)
-            name, value = head.group(2), prolog[pos + 1 : end] if end >= 0 else None
-            if not head.group(1) and name not in _PREDEFINED:
-                # The first declaration of a name binds (XML 1.0, section 4.2); a value
-                # ending beyond the kept prolog is over the limit too.
-                too_long = value is None or len(value) > ENTITY_LIMIT
-                literals.setdefault(name, None if too_long else value)
-            if end < 0:
-                break  # all that follows is inside the literal
-            pos = end + 1
-        pos = _declaration_end(prolog, pos)
-    return literals
-
-
-def _internal_subset(prolog: str) -> int:
-    """Where the DOCTYPE's internal subset starts, past its ``[``; -1 if it has none."""
-    pos = 0
-    while (start := prolog.find("<", pos)) >= 0:
-        if prolog.startswith(("<!--", "<?"), start):
-            pos = _after(prolog, "-->" if prolog[start + 1] == "!" else "?>", start + 2)
-            if pos < 0:
-                return -1
-        elif prolog.startswith("<!DOCTYPE", start):
-            pos = start + 9
-            while mark := _DOCTYPE_MARK.search(prolog, pos):
-                if mark.group() == "[":
-                    return mark.end()
-                if mark.group() == ">":
-                    return -1
-                pos = _after(prolog, mark.group(), mark.end())
-                if pos < 0:
-                    return -1
-            return -1
+    pos, marks = len("<!DOCTYPE"), _DOCTYPE_MARK
+    while pos >= 0 and (mark := marks.search(text, pos)):
+        char, pos = mark.group(), mark.end()
+        if char == ">":
+            return pos
+        if char in "\"'":
+            pos = _after(text, char, pos)
+        elif char in "[]":
+            marks = _SUBSET_MARK if char == "[" else _DOCTYPE_MARK
+        elif text.startswith("!--", pos):
+            pos = _after(text, "-->", pos + 3)
+        elif text.startswith("?", pos):
+            pos = _after(text, "?>", pos + 1)
         else:
-            pos = start + 1
+            pos = _declaration_end(text, pos)
     return -1
 
 
@@ -865,10 +760,12 @@ class _Sanitiser:
         self.carry = ""
         self.in_prolog = True
         self.in_comment = False
-        self.doctype = False
-        #: Quoted literals of a DOCTYPE are skipped (an entity's value may hold "<b>"),
-        #: unless one runs longer than PROLOG_LIMIT: then quotes are no longer heeded.
-        self.heed_quotes = True
+        self.doctype_seen = False
+        #: The DOCTYPE's text while it is gathered, up to DOCTYPE_LIMIT characters.
+        self.doctype: str | None = None
+        #: What goes to the parser before the root element: line breaks and the DOCTYPE.
+        self.head = ""
+        self.doctype_kept = False
         self.prolog_lines = 0
         self.illegal = 0
         self.markup = _Markup()
@@ -880,8 +777,6 @@ class _Sanitiser:
             # Keep back a reference, colour code or DTD keyword cut by the chunk boundary.
             tail = text[-80:]
             held = [m.start() for m in (_OPEN_CHAR_REF.search(tail),) if m is not None]
-            if open_reference := _OPEN_ENTITY_REFERENCE.search(tail):
-                held.append(open_reference.start())
             held += [tail.rfind(mark) for mark in ("\x1b", "<") if mark in tail]
             if held:
                 cut = len(text) - len(tail) + min(held)
@@ -896,18 +791,22 @@ class _Sanitiser:
             text = xml_text.rare_illegal().sub(self._show, text)
         if "&#" in text:
             text = _CHAR_REF.sub(self._show_reference, text)
+        head = ""
         if self.in_prolog:
             text, unfinished = self._skip_prolog(text, final)
             self.carry = unfinished + self.carry
+            if not self.in_prolog:
+                head, self.head = self.head, ""
         if "<!" in text:
-            # Anything DTD-like left (smuggled, late, unterminated) is made inert: the
+            # Anything DTD-like after the prolog (smuggled, late) is made inert: the
             # parser then reports broken markup instead of defining entities.
             text, found = _DTD_MARKUP.subn("&lt;!", text)
             if found:
                 self.result.repairs.append(
-                    "DTD markup was made inert: DTDs and entities are never loaded or expanded"
+                    "DTD markup after the root element started was made inert: it declares "
+                    "nothing and loads nothing"
                 )
-        return self.markup.feed(text, final).encode("utf-8")
+        return (head + self.markup.feed(text, final)).encode("utf-8")
 
     def _decode(self, data: bytes, final: bool) -> str:
         if self.decoder is None:
@@ -950,77 +849,86 @@ class _Sanitiser:
         return xml_text.shown_code(code)
 
     def _skip_prolog(self, text: str, final: bool = False) -> tuple[str, str]:
-        """Drop everything before the root element, streaming: nothing there is needed.
+        """Drop everything before the root element but the DOCTYPE, streaming.
 
         The prolog may only hold the declaration (we re-encode anyway), comments,
-        processing instructions and a DOCTYPE, which must never reach the parser: it
-        could define entities (bombs) or point at files and the network; its small
-        internal entities are read from the text kept here (:class:`_Entities`). Returns
-        the text from the root element on, and an unfinished tail to look at again.
+        processing instructions and a DOCTYPE. The first DOCTYPE is gathered whole and
+        put in ``head``, for the parser to expand its internal entities (it loads
+        nothing external, see :func:`new_parser`); the rest is not needed. Returns the
+        text from the root element on, and an unfinished tail to look at again.
         """
         index = 0
-        entities = self.markup.entities
         while True:
+            if self.doctype is not None:
+                whole = self.doctype + text[index:]
+                end = _doctype_end(whole[:DOCTYPE_LIMIT])
+                if end < 0 and len(whole) <= DOCTYPE_LIMIT and not final:
+                    self.doctype = whole
+                    return "", ""  # it ends in a later chunk
+                self.doctype = None
+                if end < 0:
+                    # Too long or never ended: scanned on as prolog, from inside it.
+                    self.result.repairs.append(
+                        f"the DOCTYPE does not end within {DOCTYPE_LIMIT} characters: "
+                        "its entities are not defined"
+                    )
+                    text, index = whole, len("<!DOCTYPE")
+                else:
+                    self._keep_doctype(whole[:end])
+                    text, index = whole[end:], 0
+                continue
             if self.in_comment:
                 end = text.find("-->", index)
                 if end < 0:
                     self.prolog_lines += text.count("\n", 0, len(text) - 2)
-                    entities.capture(text[:-2])
                     return "", text[-2:]
                 index, self.in_comment = end + 3, False
                 continue
-            if self.doctype and self.heed_quotes:
-                mark = _PROLOG_MARK.search(text, index)
-                start = mark.start() if mark else -1
-                if mark and mark.group() != "<":
-                    quote = start
-                    end = text.find(text[quote], quote + 1, quote + 1 + PROLOG_LIMIT)
-                    if end >= 0:
-                        index = end + 1
-                    elif final or len(text) - quote > PROLOG_LIMIT:
-                        # Unterminated: a broken DOCTYPE, read on as if unquoted.
-                        self.heed_quotes, index = False, quote + 1
-                    else:
-                        self.prolog_lines += text.count("\n", 0, quote)
-                        entities.capture(text[:quote])
-                        return "", text[quote:]  # the literal ends in a later chunk
-                    continue
-            else:
-                start = text.find("<", index)
+            start = text.find("<", index)
             if start < 0 or start + 1 >= len(text):
                 kept = len(text) if start < 0 else start
                 self.prolog_lines += text.count("\n", 0, kept)
-                entities.capture(text[:kept])
                 return "", text[kept:]
             if len(text) - start < 9 and "<!DOCTYPE".startswith(text[start:]):
                 self.prolog_lines += text.count("\n", 0, start)
-                entities.capture(text[:start])
                 return "", text[start:]  # a keyword cut by the chunk boundary
             if text.startswith("<!--", start):
                 self.in_comment, index = True, start + 4
                 continue
-            if text.startswith("<!DOCTYPE", start) and not self.doctype:
-                self.doctype = True
-                self.result.repairs.append(
-                    "a DOCTYPE was removed: no DTD or external entity is ever loaded"
-                )
+            if text.startswith("<!DOCTYPE", start) and not self.doctype_seen:
+                self.doctype_seen = True
+                self.result.repairs.append(DOCTYPE_REMOVED)
+                self.prolog_lines += text.count("\n", 0, start)
+                self.doctype, text, index = "", text[start:], 0
+                continue
             after = text[start + 1]
             if after.isalpha() or after in "_:":
                 self.in_prolog = False
-                entities.capture(text[:start])
-                if self.doctype:
-                    self.result.repairs.extend(entities.define())
                 # Keep the line count, so the parser's line numbers match the file's.
-                lines = min(self.prolog_lines + text.count("\n", 0, start), 100_000)
-                return "\n" * lines + text[start:], ""
+                self.head += "\n" * min(self.prolog_lines + text.count("\n", 0, start), 100_000)
+                return text[start:], ""
             index = start + 1
 
-    def finish(self) -> None:
-        if self.markup.entities.over_budget:
+    def _keep_doctype(self, doctype: str) -> None:
+        """Put ``doctype`` in ``head`` if the parser reads it; else drop it, saying why.
+
+        A broken DOCTYPE would make the whole file unreadable; without it, only a use of
+        its entities is damage.
+        """
+        try:
+            etree.fromstring(f"{doctype}<x/>".encode(), new_parser())
+        except etree.XMLSyntaxError as error:
+            self.prolog_lines += doctype.count("\n")
             self.result.repairs.append(
-                f"{self.markup.entities.over_budget} entity reference(s) beyond "
-                f"{ENTITY_BUDGET} expanded characters were not expanded"
+                f"a DOCTYPE the parser cannot read ({_message(error)}) was dropped: "
+                "its entities are not defined"
             )
+            return
+        self.head = "\n" * min(self.prolog_lines, 100_000) + doctype
+        self.prolog_lines = 0
+        self.doctype_kept = True
+
+    def finish(self) -> None:
         if self.markup.dropped_attributes:
             self.result.problems.append(
                 f"{self.markup.dropped_attributes} attribute(s) beyond the first "
@@ -1039,7 +947,13 @@ class _Sanitiser:
 
 def _open_regular(path: Path, result: ReadResult) -> BinaryIO | None:
     """The file opened for reading, or None with the reason added to ``result``."""
-    if path.is_dir():
+    try:
+        # Raises for a file in a folder this user may list but not enter.
+        is_dir = path.is_dir()
+    except OSError as error:
+        result.problems.append(f"cannot open the result file: {error.strerror}")
+        return None
+    if is_dir:
         result.problems.append("a directory is where the result file should be")
         return None
     try:
@@ -1075,19 +989,44 @@ def read(path: Path) -> ReadResult:
     return result
 
 
+class _NothingExternal(etree.Resolver):
+    """Answers every DTD, entity or file the parser would load with nothing.
+
+    ``resolve_entities='internal'`` refuses external general entities only: libxml2
+    before 2.13 still loads an external parameter entity (``%p;``) from a file here
+    (lxml 5.2.1's bundled 2.12 does, and so does Ubuntu 24.04's 2.9.14).
+    """
+
+    def resolve(  # type: ignore[override]  # lxml passes a context; its stubs omit it
+        self, system_url: str, public_id: str, context: object
+    ) -> object:
+        return self.resolve_string("", context, base_url=None)
+
+
+def new_parser(target: object | None = None) -> etree.XMLParser:
+    """The parser every result file is read with: safe on its own, whatever it is fed.
+
+    libxml2 expands a DOCTYPE's internal entities and nothing else: no DTD, external
+    entity or URL is loaded, and without ``huge_tree`` it keeps its limits on entity
+    expansion (2.11 and later) and on one text, name or attribute value. It does not
+    bound one huge attribute, CDATA section or comment in memory: the sanitiser does.
+    """
+    parser = etree.XMLParser(
+        target=cast("etree.ParserTarget | None", target),
+        resolve_entities="internal",  # type: ignore[arg-type]  # lxml-stubs predate lxml 5
+        load_dtd=False,
+        no_network=True,
+        huge_tree=False,
+        remove_pis=True,
+    )
+    parser.resolvers.add(_NothingExternal())
+    return parser
+
+
 def _parse(handle: BinaryIO, result: ReadResult) -> None:
     """Stream the file through the sanitiser into the parser, stopping at the first damage."""
     builder = _Builder(result)
-    parser = etree.XMLParser(
-        target=cast("etree.ParserTarget", builder),
-        # Safe only because no DTD markup reaches the parser: no entity is defined but
-        # the five predefined ones, which attribute values need resolved.
-        resolve_entities=True,
-        no_network=True,
-        load_dtd=False,
-        huge_tree=True,
-        remove_pis=True,
-    )
+    parser = new_parser(builder)
     sanitiser = _Sanitiser(result)
     _counts.invalid = 0
     while True:
@@ -1102,17 +1041,17 @@ def _parse(handle: BinaryIO, result: ReadResult) -> None:
             )
             break
         try:
-            parser.feed(sanitiser.feed(chunk, final))
+            data = sanitiser.feed(chunk, final)
+            builder.fed += len(data)
+            builder.count_expansion = sanitiser.doctype_kept
+            parser.feed(data)
             if sanitiser.markup.damage is not None:
                 result.problems.append(sanitiser.markup.damage)
                 break
             if final:
                 parser.close()
-        except _TooDeep:
-            result.problems.append(
-                f"elements nest deeper than {MAX_DEPTH} levels: not a result file; "
-                "reading stopped there"
-            )
+        except _Stop as stop:
+            result.problems.append(str(stop))
             break
         except etree.XMLSyntaxError as error:
             if sanitiser.in_prolog:
@@ -1137,8 +1076,18 @@ def _remaining(handle: BinaryIO) -> int:
         return 0
 
 
+def _message(error: etree.XMLSyntaxError) -> str:
+    return str(error.msg if hasattr(error, "msg") else error).strip()
+
+
 def _describe(error: etree.XMLSyntaxError, builder: _Builder, result: ReadResult) -> str:
-    message = str(error.msg if hasattr(error, "msg") else error).strip()
+    message = _message(error)
+    if _ENTITY_BOMB.search(message):
+        # Where libxml2 says it stopped is inside the entity, not a line of the file.
+        return (
+            "entity references expand too far, too deep or in a loop (an entity bomb?): "
+            f"reading stopped there (libxml2: {message})"
+        )
     where = f"line {error.lineno}" if getattr(error, "lineno", None) else "somewhere"
     if result.root_tag is None:
         return f"not XML ({message} at {where})"
