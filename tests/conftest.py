@@ -31,6 +31,18 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config: pytest.Config) -> None:
+    """The suite's own sessions hold no ID: the root package.xml makes this checkout a ROS
+    package, where the plugin would hold one for each session (the tests take their own).
+
+    Called before the plugin's own hook (a conftest registers after it); an explicit
+    ``--ros-isolation`` still wins. pytest runs of the examples load no conftest of ours.
+    """
+    if config.getoption("ros_isolation", None) is None:
+        config.option.ros_isolation = False
+
+
 def _strict(config: pytest.Config) -> bool:
     return bool(config.getoption("--no-skips")) or os.environ.get(NO_SKIPS_ENV) == "1"
 

@@ -31,8 +31,9 @@ find_program(ROS_ISOLATED_TEST_EXECUTABLE ros-isolated-test
   NO_DEFAULT_PATH)
 find_program(ROS_ISOLATED_TEST_EXECUTABLE ros-isolated-test)
 set(_ros_isolated_test_fix
-  "Install ros-isolated-test (pip install ros-isolated-test) into the environment colcon "
-  "and CMake run in, with its ros-isolated-test command on PATH, or name the command with "
+  "Install ros-isolated-test into the environment colcon and CMake run in (the source "
+  "package built and its install/setup.bash sourced, or pip: see Install it in its README), "
+  "with its ros-isolated-test command on PATH, or name the command with "
   "-DROS_ISOLATED_TEST_EXECUTABLE=/path/to/ros-isolated-test.")
 
 if(NOT ROS_ISOLATED_TEST_EXECUTABLE)
