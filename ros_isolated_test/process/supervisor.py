@@ -159,11 +159,13 @@ class _Test:
     SIGPIPE at its default, without the runner's other descriptors.
     """
 
-    def __init__(self, command: Sequence[str], env: Mapping[str, str]) -> None:
+    def __init__(
+        self, command: Sequence[str], env: Mapping[str, str], namespaces: bool = False
+    ) -> None:
         read_fd, write_fd = _pipe_above_stdio()
         try:
             with _inherited_fds_closed_on_exec():
-                self.pid = _spawn(command, env, write_fd)
+                self.pid = _spawn(command, env, write_fd, namespaces)
         except BaseException:
             os.close(read_fd)
             raise
@@ -206,11 +208,15 @@ class _Test:
         return self.returncode
 
 
-def _spawn(command: Sequence[str], env: Mapping[str, str], output_fd: int) -> int:
+def _spawn(
+    command: Sequence[str], env: Mapping[str, str], output_fd: int, namespaces: bool = False
+) -> int:
     """Start ``command`` with ``output_fd`` as its stdout and stderr; its PID.
 
     Each match on the test's PATH is tried in turn, as execvp does: a script whose
-    interpreter is missing (ENOENT) gives way to the next match.
+    interpreter is missing (ENOENT) gives way to the next match. With ``namespaces`` the
+    test starts in namespaces of its own (``namespace.spawn``: a fork, as posix_spawn
+    cannot unshare), with the same descriptors and signals.
     """
     name = command[0]
     if os.sep in name:
@@ -220,6 +226,10 @@ def _spawn(command: Sequence[str], env: Mapping[str, str], output_fd: int) -> in
         candidates = [
             path for folder in folders if os.path.exists(path := os.path.join(folder, name))
         ]
+    if namespaces:
+        from ros_isolated_test.process import namespace
+
+        return namespace.spawn(name, candidates, command, env, output_fd, _DEFAULT_IN_TEST)
     kept: OSError | None = None
     last: OSError | None = None
     for path in candidates:
@@ -317,11 +327,15 @@ def run(
     timeout: float | None = None,
     kill_grace: float = KILL_GRACE,
     on_start: Callable[[], None] | None = None,
+    namespaces: bool = False,
 ) -> Outcome:
     """Run ``command`` to its end and its tree's end, streaming its output into ``capture``.
 
     ``on_start`` is called once the test exists, while this function's signal handlers
     are in place: the caller learns the test started with no window for a signal between.
+    ``namespaces``: start it in user, network, mount and IPC namespaces of its own
+    (``namespace``); its processes stay in the runner's PID namespace and tree, so they
+    are ended exactly as in domain mode.
     """
     reaper.become_subreaper()
     start = time.monotonic()
@@ -329,7 +343,7 @@ def run(
     # Handlers before the test exists: a signal arriving as it starts must reach it too.
     with _child_statuses_kept(), _Signals(others) as signals:
         try:
-            test = _Test(command, env)
+            test = _Test(command, env, namespaces)
         except OSError as error:
             return Outcome(returncode=None, duration=time.monotonic() - start, start_error=error)
         if on_start is not None:

@@ -4,10 +4,15 @@ A preset ROS_DOMAIN_ID is refused rather than respected: upstream silently runs 
 on it, so a developer's exported ID turns a parallel run into crosstalk nobody notices.
 A preset Gazebo partition (GZ_PARTITION, IGN_PARTITION) is refused for the same reason:
 the runner gives each test one of its own (see ``partition``).
+
+Namespace isolation (``--isolation namespace``) is decided here too: what contradicts it
+(a discovery range or static peers that need the outside network) and, for ``auto``,
+whether this host allows it, probed once before anything is reserved.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Mapping, Sequence
 
@@ -16,10 +21,17 @@ from ros_isolated_test.runner import discovery, partition
 from ros_isolated_test.runner.request import EnvAssignment
 from ros_isolated_test.runner.settings import (
     DISABLE_VAR,
+    ISOLATION_ENV,
     RERUNS_ENV,
     Settings,
+    SettingsError,
     disables_isolation,
+    isolation_from,
 )
+
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from ros_isolated_test.process.namespace import Problem
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
 #: Set beside ROS_DOMAIN_ID to the same ID wherever a runner (or the pytest plugin) holds
@@ -48,7 +60,17 @@ class RefusedError(Exception):
 class Policy:
     """What the runner decided before anything runs."""
 
-    __slots__ = ("discovery", "env", "gz_partition", "isolate", "notes")
+    __slots__ = (
+        "asked",
+        "discovery",
+        "env",
+        "fallback",
+        "gz_partition",
+        "isolate",
+        "mode",
+        "namespaces",
+        "notes",
+    )
 
     def __init__(
         self,
@@ -57,6 +79,10 @@ class Policy:
         notes: tuple[str, ...],
         discovery: discovery.Discovery | None = None,
         gz_partition: bool = False,
+        namespaces: bool = False,
+        mode: str = "domain",
+        fallback: str | None = None,
+        asked: str = "",
     ) -> None:
         #: Reserve a domain ID (False only with DISABLE_ROS_ISOLATION).
         self.isolate = isolate
@@ -68,6 +94,29 @@ class Policy:
         self.discovery = discovery
         #: Give the test a Gazebo partition of its own (not opted out, isolation on).
         self.gz_partition = gz_partition
+        #: Run the test in namespaces of its own (``process.namespace``): never wait for an ID.
+        self.namespaces = namespaces
+        #: The isolation mode asked for (settings, or ``--env``, which has the last word).
+        self.mode = mode
+        #: Why ``auto`` runs on the domain ID alone (namespaces not allowed, or contradicted).
+        self.fallback = fallback
+        #: How the mode was asked for (``--isolation namespace``, the variable), for messages.
+        self.asked = asked
+
+    def refusal(self, error: OSError) -> RefusedError:
+        """The refusal for namespaces the test could not enter when it was started.
+
+        ``--isolation namespace`` probes nothing beforehand (a probe costs as much as
+        the set-up itself): the test's own start is the probe, before anything of it ran.
+        """
+        from ros_isolated_test.process import namespace
+
+        problem = namespace.explain(
+            error
+            if isinstance(error, namespace.NamespaceError)
+            else namespace.NamespaceError("unshare", error.errno or errno.EPERM)
+        )
+        return _refused_namespaces(self.asked, problem)
 
     def partition_for(self, domain_id: int) -> str | None:
         """The test's Gazebo partition on ``domain_id``, held by this process (None: none set)."""
@@ -116,17 +165,23 @@ def decide(
     settings: Settings,
     environ: Mapping[str, str] | None = None,
     env_origin: str = "--env",
+    in_process: bool = False,
+    xdist: bool = False,
 ) -> Policy:
     """Build the test's environment, or raise :class:`RefusedError` for a preset domain.
 
     DISABLE_ROS_ISOLATION counts wherever the test's environment gets it: the runner's
     own environment (``settings``) or an ``--env`` assignment (ament_add_test's ENV),
-    which, like any assignment, has the last word. Raises
+    which, like any assignment, has the last word; so does ROS_ISOLATED_TEST_ISOLATION.
+    ``in_process``: the work runs in this process (the pytest plugin), which enters
+    the namespaces itself; ``xdist``: in pytest-xdist's workers, which cannot. Raises
     :class:`~ros_isolated_test.runner.discovery.DiscoveryError` for a range the test's
-    environment cannot carry (OFF on Humble).
+    environment cannot carry (OFF on Humble), :class:`RefusedError` for namespace
+    isolation that cannot be had.
     """
     environ = os.environ if environ is None else environ
     gz_partition = _partition_wanted(assignments, settings, env_origin)
+    mode, asked = _isolation_wanted(assignments, settings, env_origin)
     env, notes = apply_assignments(environ, assignments)
     # Reruns are this runner's to make: a runner started inside the test would make its
     # own on top of them, N x N attempts.
@@ -161,12 +216,17 @@ def decide(
         if gz_partition:
             _refuse_preset_partition(assignments, environ, env_origin)
         confined = discovery.decide(env, settings.discovery_range)
+        namespaces, fallback = _namespaces(mode, asked, confined, in_process, xdist)
         return Policy(
             isolate=True,
             env=env,
             notes=tuple(notes),
             discovery=confined,
             gz_partition=gz_partition,
+            namespaces=namespaces,
+            mode=mode,
+            fallback=fallback,
+            asked=asked,
         )
     domain = env.get(DOMAIN_VAR)
     where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
@@ -179,7 +239,120 @@ def decide(
             f"WARNING: the discovery range {settings.discovery_range} is not applied: "
             f"{DISABLE_VAR} leaves the test's environment as it is"
         )
-    return Policy(isolate=False, env=env, notes=(*notes, *warnings))
+    if mode != "domain":
+        warnings.append(
+            f"WARNING: {asked} is not applied: {DISABLE_VAR} runs the test as it is, "
+            "without namespaces"
+        )
+    return Policy(isolate=False, env=env, notes=(*notes, *warnings), mode=mode, asked=asked)
+
+
+def _isolation_wanted(
+    assignments: Sequence[EnvAssignment], settings: Settings, env_origin: str
+) -> tuple[str, str]:
+    """The isolation mode, and how it was asked (for messages): ``--env`` has the last word.
+
+    Read like the Gazebo switch: a CMake project sets it per test with
+    ``ENV ROS_ISOLATED_TEST_ISOLATION=namespace``; a bad value is refused (exit 2).
+    """
+    given = [item for item in assignments if item.name == ISOLATION_ENV and not item.append]
+    if given:
+        origin = f"{ISOLATION_ENV} (by {env_origin})"
+        try:
+            mode = isolation_from(given[-1].value, origin)
+        except SettingsError as error:
+            raise RefusedError(str(error), ISOLATION_ENV) from None
+        return mode, f"{ISOLATION_ENV}={mode} (by {env_origin})"
+    mode, origin = settings.isolation, settings.isolation_origin
+    return mode, f"--isolation {mode}" if origin == "--isolation" else f"{origin}={mode}"
+
+
+#: Names a test in its own network namespace can still reach: its loopback.
+_LOCAL_NAMES = frozenset({"localhost", "localhost.localdomain", "ip6-localhost", "ip6-loopback"})
+
+
+def _remote_peer(peers: str) -> str | None:
+    """The first of ROS_STATIC_PEERS (``;``-separated) that is not this loopback, if any."""
+    for peer in (item.strip() for item in peers.split(";")):
+        if not peer or peer.lower() in _LOCAL_NAMES:
+            continue
+        import ipaddress
+
+        try:
+            if ipaddress.ip_address(peer.strip("[]")).is_loopback:
+                continue
+        except ValueError:
+            pass  # a host name: another host, as far as a loopback-only network goes
+        return peer
+    return None
+
+
+def _contradiction(confined: discovery.Discovery) -> tuple[str, str] | None:
+    """What in the test's discovery needs the outside network, and the fix; None: nothing."""
+    if confined.range == "SUBNET":
+        return (
+            f"its discovery range is SUBNET ({confined.source}), which needs the outside network",
+            "use LOCALHOST (--discovery-range LOCALHOST)",
+        )
+    peer = _remote_peer(confined.peers)
+    if peer is not None:
+        return (
+            f"{discovery.PEERS_VAR}={confined.peers} names another host ({peer}), which it "
+            "cannot reach",
+            f"name only localhost there, or unset {discovery.PEERS_VAR}",
+        )
+    return None
+
+
+def _namespaces(
+    mode: str, asked: str, confined: discovery.Discovery, in_process: bool, xdist: bool
+) -> tuple[bool, str | None]:
+    """(whether the test gets namespaces, why ``auto`` falls back) for ``mode``.
+
+    ``namespace`` refuses what cannot work: a contradiction, or a host that forbids user
+    namespaces. ``auto`` falls back to the domain ID instead, so it must know before the
+    reservation (it waits for an ID only without namespaces): it probes, once
+    (``namespace.problem``). So does work in this very process (the pytest plugin).
+    ``namespace`` for a test the runner starts does not: the test's start is the probe
+    (:meth:`Policy.refusal`), which saves a second set-up on every test.
+    """
+    if mode == "domain":
+        return False, None
+    network = "gives the test a network of its own, loopback only"
+    contradiction = _contradiction(confined)
+    if contradiction is not None:
+        cause, fix = contradiction
+        if mode == "namespace":
+            raise RefusedError(
+                f"refusing to run: {asked} {network}, but {cause}; {fix}, or use isolation "
+                f"domain ({ISOLATION_ENV}, run --isolation)",
+                ISOLATION_ENV,
+            )
+        return False, f"as namespaces would cut it off: {cause}"
+    if mode == "namespace" and not (in_process or xdist):
+        return True, None
+    from ros_isolated_test.process import namespace
+
+    problem = (
+        namespace.explain(namespace.NamespaceError("xdist", errno.EINVAL))
+        if xdist
+        else namespace.problem(in_process)
+    )
+    if problem is None:
+        return True, None
+    if mode == "namespace":
+        raise _refused_namespaces(asked, problem)
+    return False, f"as namespaces are not allowed here: {problem.cause}"
+
+
+def _refused_namespaces(asked: str, problem: Problem) -> RefusedError:
+    """``--isolation namespace`` where namespaces cannot be had: the cause and the fix."""
+    return RefusedError(
+        f"refusing to run: {asked} needs Linux user namespaces, which cannot be had here: "
+        f"{problem.cause}; {problem.fix}, or use isolation auto (falls back to the domain "
+        f"ID) or domain ({ISOLATION_ENV}, run --isolation)",
+        ISOLATION_ENV,
+    )
 
 
 def _partition_wanted(

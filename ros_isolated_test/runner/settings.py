@@ -46,14 +46,23 @@ RERUNS_ENV = "ROS_ISOLATED_TEST_RERUNS"
 #: a flake that needs more than this is a failure to fix, not to retry.
 MAX_RERUNS = 100
 DISABLE_VAR = "DISABLE_ROS_ISOLATION"
+#: How a test is kept apart (``run --isolation``; the RUNNER also reads it from ``--env``).
+ISOLATION_ENV = "ROS_ISOLATED_TEST_ISOLATION"
+#: ``domain``: a reserved ROS_DOMAIN_ID (the default); ``namespace``: Linux namespaces of
+#: the test's own too, no waiting for an ID; ``auto``: namespace where allowed, else domain.
+ISOLATION_MODES = ("domain", "namespace", "auto")
+DEFAULT_ISOLATION = "domain"
 #: Values of DISABLE_ROS_ISOLATION that do not disable (upstream treats "set" as disabled).
 _FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
 
 __all__ = [
     "CAPACITY_ENV",
+    "DEFAULT_ISOLATION",
     "DEFAULT_WAIT_TIMEOUT",
     "DISABLE_VAR",
     "DISCOVERY_RANGE_ENV",
+    "ISOLATION_ENV",
+    "ISOLATION_MODES",
     "LOCK_DIR_ENV",
     "MAX_RERUNS",
     "POOL_ENV",
@@ -64,6 +73,7 @@ __all__ = [
     "SettingsError",
     "defaults",
     "disables_isolation",
+    "isolation_from",
     "read",
     "reruns_from",
     "resources_from",
@@ -81,7 +91,9 @@ class Settings:
         "capacity",
         "discovery_range",
         "gz_partition",
+        "isolation",
         "isolation_disabled",
+        "isolation_origin",
         "lock_dir",
         "notes",
         "pool",
@@ -103,6 +115,8 @@ class Settings:
         gz_partition: bool = True,
         resources: dict[str, int] | None = None,
         capacity: dict[str, int] | None = None,
+        isolation: str = DEFAULT_ISOLATION,
+        isolation_origin: str = ISOLATION_ENV,
     ) -> None:
         #: The shared lock directory (ROS_ISOLATED_TEST_LOCK_DIR).
         self.lock_dir = lock_dir
@@ -127,12 +141,17 @@ class Settings:
         #: The capacity of every resource named in ROS_ISOLATED_TEST_CAPACITY or asked for
         #: (the default where the variable is silent): what all runners must agree on.
         self.capacity = capacity or {}
+        #: One of :data:`ISOLATION_MODES` (--isolation, ROS_ISOLATED_TEST_ISOLATION), and
+        #: where it was given, for messages.
+        self.isolation = isolation
+        self.isolation_origin = isolation_origin
 
     def __repr__(self) -> str:
         return (
             f"Settings(lock_dir={self.lock_dir!r}, pool={len(self.pool)} IDs, "
             f"wait_timeout={self.wait_timeout!r}, discovery_range={self.discovery_range!r}, "
-            f"isolation_disabled={self.isolation_disabled!r}, reruns={self.reruns!r}, "
+            f"isolation_disabled={self.isolation_disabled!r}, isolation={self.isolation!r}, "
+            f"reruns={self.reruns!r}, "
             f"resources={describe(self.resources)!r})"
         )
 
@@ -140,6 +159,17 @@ class Settings:
 def disables_isolation(value: str | None) -> bool:
     """DISABLE_ROS_ISOLATION as upstream reads it (set means disabled), except explicit no's."""
     return value is not None and value.strip().lower() not in _FALSE_WORDS
+
+
+def isolation_from(text: str, origin: str = ISOLATION_ENV) -> str:
+    """An isolation mode (lower case), or :class:`SettingsError` naming ``origin``."""
+    value = text.strip().lower()
+    if value not in ISOLATION_MODES:
+        raise SettingsError(
+            f"{origin}={text!r} is not an isolation mode; use one of "
+            f"{', '.join(ISOLATION_MODES)} (default {DEFAULT_ISOLATION})"
+        )
+    return value
 
 
 def _seconds(text: str, name: str, fix: str) -> float:
@@ -203,6 +233,7 @@ def read(
     reruns: int | None = None,
     resources: str | None = None,
     resources_origin: str = "--resources",
+    isolation: str | None = None,
 ) -> Settings:
     """The settings from options (None: not given) and ``environ`` (default: os.environ).
 
@@ -210,6 +241,7 @@ def read(
     network namespace's. ``resources``: the request as given by an option ("" for an entry
     point that asks for none); None reads ROS_ISOLATED_TEST_RESOURCES. ``resources_origin``
     names where that string came from, in its error (the RUNNER's ``--env``, a pytest option).
+    ``isolation``: ``--isolation`` as given; None reads ROS_ISOLATED_TEST_ISOLATION.
     Raises :class:`SettingsError` for a value that cannot be used.
     """
     environ = os.environ if environ is None else environ
@@ -239,6 +271,12 @@ def read(
         request = resources_from(environ.get(RESOURCES_ENV, ""), RESOURCES_ENV, explicit)
     else:
         request = resources_from(resources, resources_origin, explicit)
+    if isolation is not None:
+        mode, mode_origin = isolation_from(isolation, "--isolation"), "--isolation"
+    else:
+        text = environ.get(ISOLATION_ENV, "")
+        mode = isolation_from(text) if text.strip() else DEFAULT_ISOLATION
+        mode_origin = ISOLATION_ENV
     try:
         gz_partition = partition.enabled(environ.get(partition.OPT_OUT_ENV))
     except partition.PartitionSettingError as error:
@@ -258,6 +296,8 @@ def read(
         gz_partition=gz_partition,
         resources=request,
         capacity={**explicit, **capacity_for(request, explicit)},
+        isolation=mode,
+        isolation_origin=mode_origin,
     )
 
 

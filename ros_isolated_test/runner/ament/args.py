@@ -29,7 +29,10 @@ EPILOG = (
     "ROS_ISOLATED_TEST_RESOURCES=cpu=2,mem=4G,gpu=1 (also in --env / ENV, which wins): "
     "machine resources the test holds with its ID, waiting until they are free; "
     "ROS_ISOLATED_TEST_CAPACITY: how much of each the machine has (default: its CPUs, its "
-    "memory, 1 of any other name)."
+    "memory, 1 of any other name); "
+    "ROS_ISOLATED_TEST_ISOLATION=domain|namespace|auto (also in --env / ENV, which wins): "
+    "namespace runs the test in a network, /dev/shm and IPC of its own too, never waiting "
+    "for an ID."
 )
 
 #: run_test.py's options: (name, metavar or None for a flag, repeats, help). No argparse:

@@ -1,0 +1,576 @@
+"""Linux namespaces for one test: a network, a /dev/shm and IPC of its own, as the same user.
+
+A domain ID keeps DDS discovery apart and nothing else: two tests serving on one fixed
+port (rosbridge's 9090, a Zenoh router's 7447, a test's own server) still collide, and
+shared-memory transports meet in the common /dev/shm even across network namespaces
+(measured). So in namespace mode the test runs in new user, network, mount and IPC
+namespaces: loopback up with multicast (DDS, Zenoh and plain sockets work inside,
+reach nothing outside), a private tmpfs on /dev/shm, and a user namespace that maps the
+caller's own uid and gid (``getuid()``, file owners and ``$HOME`` unchanged; as root
+every ID the caller has is mapped to itself).
+
+Done with ``unshare(2)``, ``mount(2)`` and one ``ioctl(SIOCSIFFLAGS)`` through ctypes,
+which the reaper has loaded already: no helper program, no second interpreter. The
+supervisor forks (it is single-threaded), the child unshares and waits while the
+runner, still outside, writes its ID maps (only a process in the parent namespace may
+map more than its own ID); the child then mounts, brings loopback up and execs the test.
+
+No PID namespace: its first process would be init there, which ignores SIGTERM unless
+it handles it, so a timeout's SIGTERM would no longer end a plain test; and the
+runner, a child subreaper in its own PID namespace, already finds and ends every
+process of the test, however it forked.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import signal
+import sys
+
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Mapping, Sequence
+    from typing import NoReturn
+
+CLONE_NEWNS = 0x00020000
+CLONE_NEWIPC = 0x08000000
+CLONE_NEWUSER = 0x10000000
+CLONE_NEWNET = 0x40000000
+#: Everything the test gets of its own, in one unshare(2).
+FLAGS = CLONE_NEWUSER | CLONE_NEWNET | CLONE_NEWNS | CLONE_NEWIPC
+_MS_NOSUID = 0x2
+_MS_NODEV = 0x4
+_MS_REC = 0x4000
+_MS_PRIVATE = 1 << 18
+_AF_INET = 2
+_SOCK_DGRAM = 2
+_SOCK_CLOEXEC = 0o2000000
+_SIOCSIFFLAGS = 0x8914
+#: What a new network namespace's loopback needs for DDS: up, and multicast (measured).
+LOOPBACK_FLAGS = 0x1 | 0x8 | 0x1000  # IFF_UP | IFF_LOOPBACK | IFF_MULTICAST
+SHM = "/dev/shm"
+#: ``capset(2)``'s header version for 64-bit capability sets.
+_CAPABILITY_VERSION_3 = 0x20080522
+#: Held back in a forked child until it execs (or exits): the signals the runner passes
+#: on, whose Python handlers the child inherits and must never run.
+HELD_BACK = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+#: What each step does, for messages: "cannot <this>: <strerror>".
+STEPS = {
+    "threads": "enter a user namespace from a process that runs threads",
+    "xdist": "enter a user namespace from a pytest-xdist worker, which runs threads",
+    "unshare": "create user, network, mount and IPC namespaces (unshare)",
+    "map": "map the user's uid and gid into the new user namespace",
+    "mount": "make the test's mounts private",
+    "shm": f"mount a private tmpfs on {SHM}",
+    "loopback": "bring the loopback interface up",
+    "capabilities": "drop the capabilities the new user namespace gave",
+}
+#: A sysctl read to explain a refusal, and the file holding it.
+MAX_USER_NAMESPACES = "/proc/sys/user/max_user_namespaces"
+_DEBIAN_SWITCH = "/proc/sys/kernel/unprivileged_userns_clone"
+_APPARMOR_SWITCH = "/proc/sys/kernel/apparmor_restrict_unprivileged_userns"
+
+
+class NamespaceError(OSError):
+    """A step of entering the namespaces failed; ``step`` names it (see :data:`STEPS`)."""
+
+    def __init__(self, step: str, number: int) -> None:
+        super().__init__(number, f"cannot {STEPS.get(step, step)}: {os.strerror(number)}")
+        self.step = step
+
+
+class Problem:
+    """Why namespaces cannot be had here: the cause and the fix, each a short clause."""
+
+    __slots__ = ("cause", "fix")
+
+    def __init__(self, cause: str, fix: str) -> None:
+        self.cause = cause
+        self.fix = fix
+
+    def __str__(self) -> str:
+        return f"{self.cause}; {self.fix}"
+
+
+class _Libc:
+    """The system calls Python 3.11's os lacks (unshare, mount, ioctl, capset), bound once.
+
+    Bound before any fork: the child only calls them, it loads nothing.
+    """
+
+    def __init__(self) -> None:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        self.get_errno = ctypes.get_errno
+        self.unshare = libc.unshare
+        self.unshare.argtypes = [ctypes.c_int]
+        self.mount = libc.mount
+        self.mount.argtypes = [ctypes.c_char_p] * 3 + [ctypes.c_ulong, ctypes.c_char_p]
+        self.socket = libc.socket
+        self.socket.argtypes = [ctypes.c_int] * 3
+        self.ioctl = libc.ioctl
+        self.ioctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_char_p]
+        self.close = libc.close
+        self.close.argtypes = [ctypes.c_int]
+        self.capset = libc.capset
+        self.capset.argtypes = [ctypes.c_char_p, ctypes.c_char_p]
+        # struct ifreq: the name in 16 bytes, then the flags (a short) in a 24-byte union.
+        flags = LOOPBACK_FLAGS.to_bytes(2, sys.byteorder)
+        self.ifreq = ctypes.create_string_buffer(b"lo".ljust(16, b"\0") + flags.ljust(24, b"\0"))
+        # capset(2): header {version, pid 0: this process}, then two empty sets of three.
+        version = _CAPABILITY_VERSION_3.to_bytes(4, sys.byteorder)
+        self.cap_header = ctypes.create_string_buffer(version + bytes(4))
+        self.cap_data = ctypes.create_string_buffer(24)
+
+    def failed(self, step: str) -> NamespaceError:
+        return NamespaceError(step, self.get_errno() or errno.EPERM)
+
+
+_LIBC: _Libc | None = None
+
+
+def _libc() -> _Libc:
+    global _LIBC
+    if _LIBC is None:
+        _LIBC = _Libc()
+    return _LIBC
+
+
+def _inside(lib: _Libc, shm: bool) -> None:
+    """In the new namespaces (capabilities there, IDs mapped): private mounts, /dev/shm, lo.
+
+    Propagation private first, so the tmpfs never shows outside (a mount namespace made
+    in a new user namespace gets slave propagation anyway; "/" that is no mount point,
+    as in a chroot, refuses with EINVAL and is left so).
+    """
+    if lib.mount(None, b"/", None, _MS_REC | _MS_PRIVATE, None) != 0:
+        error = lib.failed("mount")
+        if error.errno != errno.EINVAL:
+            raise error
+    if shm and lib.mount(b"tmpfs", SHM.encode(), b"tmpfs", _MS_NOSUID | _MS_NODEV, b"mode=1777"):
+        raise lib.failed("shm")
+    fd = lib.socket(_AF_INET, _SOCK_DGRAM | _SOCK_CLOEXEC, 0)
+    if fd < 0:
+        raise lib.failed("loopback")
+    done = lib.ioctl(fd, _SIOCSIFFLAGS, lib.ifreq)
+    error = lib.failed("loopback")
+    lib.close(fd)
+    if done != 0:
+        raise error
+
+
+def _identity(kind: str) -> str:
+    """Every range of IDs this process has (``uid_map``/``gid_map``), each mapped to itself."""
+    with open(f"/proc/self/{kind}", encoding="ascii") as handle:
+        ranges = [line.split() for line in handle if line.strip()]
+    return "".join(f"{first} {first} {count}\n" for first, _outside, count in ranges)
+
+
+def _write(path: str, text: str) -> None:
+    # os.open, never open(..., "w"): O_CREAT|O_TRUNC on these files can fail the write.
+    fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC)
+    try:
+        os.write(fd, text.encode("ascii"))
+    finally:
+        os.close(fd)
+
+
+def write_maps(pid: int) -> None:
+    """Map the caller's IDs into ``pid``'s new user namespace, from outside it.
+
+    A user maps its own uid and gid (groups denied: the kernel's rule for one unprivileged
+    line). Root maps every ID it has to itself and keeps setgroups, so files of other
+    users stay theirs and root stays root to them; where even root may not (a root that
+    is itself in a user namespace without those IDs), one line as for a user.
+    """
+    base = f"/proc/{pid}/"
+    uid, gid = os.geteuid(), os.getegid()
+    if uid == 0:
+        try:
+            _write(base + "uid_map", _identity("uid_map"))
+            _write(base + "gid_map", _identity("gid_map"))
+            return
+        except PermissionError:
+            pass
+    try:
+        _write(base + "uid_map", f"{uid} {uid} 1")
+    except OSError as error:
+        if error.errno != errno.EPERM or not _mapped(base + "uid_map"):
+            raise
+    _write(base + "setgroups", "deny")
+    _write(base + "gid_map", f"{gid} {gid} 1")
+
+
+def _mapped(path: str) -> bool:
+    """Whether an ID map was written already (root's identity map took uid, not gid)."""
+    with open(path, encoding="ascii") as handle:
+        return bool(handle.read().strip())
+
+
+def _report(fd: int, error: BaseException) -> None:
+    """A failed step, as the child tells it: ``<step> <errno>``."""
+    step = getattr(error, "step", "exec")
+    number = getattr(error, "errno", None) or errno.EPERM
+    with contextlib.suppress(OSError):
+        os.write(fd, f"{step} {number}\n".encode("ascii"))
+
+
+def _failure(report: bytes) -> NamespaceError:
+    """What the child reported back, as the error it describes."""
+    words = report.split()
+    try:
+        return NamespaceError(words[0].decode("ascii"), int(words[1]))
+    except (IndexError, ValueError, UnicodeDecodeError):
+        return NamespaceError("unshare", errno.EIO)
+
+
+def _read_all(fd: int) -> bytes:
+    data = b""
+    while chunk := os.read(fd, 4096):
+        data += chunk
+    return data
+
+
+class _Exec:
+    """What the child execs once inside: ``execve`` on each candidate, as execvp would."""
+
+    __slots__ = ("argv", "candidates", "defaults", "env", "mask", "output_fd")
+
+    def __init__(
+        self,
+        candidates: Sequence[str],
+        argv: Sequence[str],
+        env: Mapping[str, str],
+        output_fd: int,
+        defaults: Iterable[int],
+    ) -> None:
+        self.candidates = list(candidates)
+        self.argv = list(argv)
+        self.env = dict(env)
+        self.output_fd = output_fd
+        self.defaults = tuple(defaults)
+        self.mask: set[int | signal.Signals] = set()
+
+    def run(self) -> NoReturn:
+        """Never returns: execs the test, or raises the error posix_spawn would have."""
+        os.dup2(self.output_fd, 1)
+        os.dup2(self.output_fd, 2)
+        for signum in self.defaults:
+            signal.signal(signum, signal.SIG_DFL)
+        # Unblocked only now, with default actions: a signal the runner passed on while
+        # the child was being set up ends it as it would end the test.
+        signal.pthread_sigmask(signal.SIG_SETMASK, self.mask)
+        kept: OSError | None = None
+        last: OSError | None = None
+        for path in self.candidates:
+            try:
+                os.execve(path, self.argv, self.env)
+            except OSError as error:
+                last = error
+                if kept is None and error.errno not in (errno.ENOENT, errno.ENOTDIR):
+                    kept = error
+        raise kept or last or FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT))
+
+
+def _child(lib: _Libc, report_w: int, go_r: int, shm: bool, plan: _Exec | None) -> NoReturn:
+    """The forked child: unshare, wait for the maps, set up, exec (or, probing, exit 0)."""
+    try:
+        if lib.unshare(FLAGS) != 0:
+            raise lib.failed("unshare")
+        os.write(report_w, b"U")
+        if os.read(go_r, 1) != b"G":
+            os._exit(127)  # the runner could not map us, and says so itself
+        _inside(lib, shm)
+        if plan is None:
+            os._exit(0)
+        plan.run()
+    except BaseException as error:  # never back into the runner's code
+        _report(report_w, error)
+    os._exit(127)
+
+
+def _fork(lib: _Libc, shm: bool, plan: _Exec | None) -> tuple[int, int, int]:
+    """Fork the child, :data:`HELD_BACK` blocked in it; (pid, report_r, go_w)."""
+    report_r, report_w = os.pipe()
+    go_r, go_w = os.pipe()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_BACK)
+    try:
+        pid = os.fork()
+    except BaseException:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        for fd in (report_r, report_w, go_r, go_w):
+            os.close(fd)
+        raise
+    if pid == 0:  # pragma: no cover (the child: reports through the pipe, never returns)
+        if plan is not None:
+            plan.mask = mask
+        os.close(report_r)
+        os.close(go_w)
+        _child(lib, report_w, go_r, shm, plan)
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    os.close(report_w)
+    os.close(go_r)
+    return pid, report_r, go_w
+
+
+def _hand_over(pid: int, report_r: int, go_w: int) -> bytes:
+    """Map the child's IDs once it has unshared; what it reported after (b"": no failure)."""
+    try:
+        first = os.read(report_r, 1)
+        if first != b"U":
+            os.close(go_w)
+            go_w = -1
+            return first + _read_all(report_r) if first else b""
+        try:
+            write_maps(pid)
+        except OSError as error:
+            os.close(go_w)
+            go_w = -1
+            _read_all(report_r)
+            return f"map {error.errno or errno.EPERM}\n".encode("ascii")
+        os.write(go_w, b"G")
+        return _read_all(report_r)
+    finally:
+        if go_w >= 0:
+            os.close(go_w)
+        os.close(report_r)
+
+
+def _reap(pid: int) -> int:
+    """The child's wait status, once it has ended (EINTR retried by os.waitpid)."""
+    try:
+        return os.waitpid(pid, 0)[1]
+    except ChildProcessError:
+        return 0  # reaped by an embedding program's handler: its report says enough
+
+
+def spawn(
+    name: str,
+    candidates: Sequence[str],
+    argv: Sequence[str],
+    env: Mapping[str, str],
+    output_fd: int,
+    defaults: Iterable[int],
+) -> int:
+    """Start the test in namespaces of its own; its PID.
+
+    Like posix_spawn as the supervisor calls it: ``output_fd`` becomes stdout and
+    stderr, ``defaults`` get their default action, each of ``candidates`` is tried in
+    turn, and an exec error is raised as that OSError, named ``name``. The signals the
+    runner passes on (:data:`HELD_BACK`) wait in the child until it execs, then act as
+    they would on the test. Raises :class:`NamespaceError` when a step of the set-up fails.
+    """
+    lib = _libc()
+    plan = _Exec(candidates, argv, env, output_fd, (*defaults, *HELD_BACK))
+    pid, report_r, go_w = _fork(lib, os.path.isdir(SHM), plan)
+    report = _hand_over(pid, report_r, go_w)
+    if not report:
+        return pid
+    _reap(pid)
+    error = _failure(report)
+    if error.step == "exec":
+        raise OSError(error.errno, os.strerror(error.errno or errno.EIO), name)
+    raise error
+
+
+_PROBED: list[NamespaceError | None] = []
+
+
+def probe() -> NamespaceError | None:
+    """Whether a child may enter the namespaces here: None, or the step that failed.
+
+    Done for real (a forked child makes them all, mounts, brings loopback up, exits),
+    once per process: a sysctl, a seccomp filter or AppArmor each refuse a different step.
+    """
+    if not _PROBED:
+        _PROBED.append(_probe())
+    return _PROBED[0]
+
+
+def _probe() -> NamespaceError | None:
+    try:
+        lib = _libc()
+        pid, report_r, go_w = _fork(lib, os.path.isdir(SHM), None)
+    except OSError as error:
+        return NamespaceError("unshare", error.errno or errno.EPERM)
+    report = _hand_over(pid, report_r, go_w)
+    status = _reap(pid)
+    if report:
+        return _failure(report)
+    if os.WIFEXITED(status) and os.WEXITSTATUS(status) != 0:
+        return NamespaceError("unshare", errno.EPERM)
+    return None
+
+
+def threads() -> int:
+    """How many threads this process runs (1 where /proc cannot say)."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as handle:
+            for line in handle:
+                if line.startswith("Threads:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return 1
+
+
+def enter_here() -> None:
+    """Put this very process (the pytest plugin's session) into namespaces of its own.
+
+    A helper forked first stays outside and writes our ID maps, as the runner does for
+    its child. A user who is not root gives back the capabilities the new user
+    namespace gave it, as an exec would: the tests run as they would have. Raises
+    :class:`NamespaceError`; nothing is entered when the unshare itself fails.
+    """
+    if threads() > 1:
+        raise NamespaceError("threads", errno.EINVAL)
+    lib = _libc()
+    me = os.getpid()
+    ready_r, ready_w = os.pipe()
+    done_r, done_w = os.pipe()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_BACK)
+    try:
+        helper = os.fork()
+    finally:
+        if os.getpid() == me:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    if helper == 0:  # pragma: no cover (a child: reports through the pipe)
+        try:
+            os.close(ready_w)
+            os.close(done_r)
+            if os.read(ready_r, 1) == b"U":
+                try:
+                    write_maps(me)
+                    os.write(done_w, b"M")
+                except OSError as error:
+                    os.write(done_w, f"map {error.errno or errno.EPERM}\n".encode("ascii"))
+        finally:
+            os._exit(0)
+    os.close(ready_r)
+    os.close(done_w)
+    try:
+        if lib.unshare(FLAGS) != 0:
+            raise lib.failed("unshare")
+        os.write(ready_w, b"U")
+        os.close(ready_w)
+        ready_w = -1
+        answer = _read_all(done_r)
+        if answer != b"M":
+            raise _failure(answer)
+        _inside(lib, os.path.isdir(SHM))
+        if os.geteuid() != 0 and lib.capset(lib.cap_header, lib.cap_data) != 0:
+            raise lib.failed("capabilities")
+    finally:
+        if ready_w >= 0:
+            os.close(ready_w)
+        os.close(done_r)
+        _reap(helper)
+
+
+def _read_text(path: str) -> str | None:
+    try:
+        with open(path, encoding="ascii", errors="replace") as handle:
+            return handle.read().strip()
+    except OSError:
+        return None
+
+
+def _seccomp_filtered() -> bool:
+    """Whether a seccomp filter is on this process (Docker's default profile is one)."""
+    status = _read_text("/proc/self/status") or ""
+    return any(line.split() == ["Seccomp:", "2"] for line in status.splitlines())
+
+
+def explain(error: NamespaceError, here: str = "this host") -> Problem:
+    """The cause of ``error`` in the words of the setting behind it, and how to allow it.
+
+    Looks at the knobs that forbid user namespaces: ``user.max_user_namespaces`` (ENOSPC
+    when 0 or used up), a seccomp filter (Docker's default profile), Debian's
+    ``kernel.unprivileged_userns_clone`` and Ubuntu's AppArmor restriction, which lets
+    the namespace be made but gives no capabilities in it (the mount then fails).
+    """
+    step, number = error.step, error.errno or errno.EPERM
+    said = f"{STEPS.get(step, step)}: {os.strerror(number)}"
+    if step in ("threads", "xdist"):
+        who = "pytest-xdist's workers run" if step == "xdist" else "this process runs"
+        return Problem(
+            f"{who} threads, and a process with threads cannot enter a user namespace",
+            "run pytest without -n (xdist), or use domain isolation",
+        )
+    if step == "unshare" and number in (errno.ENOSPC, errno.EUSERS):
+        limit = _read_text(MAX_USER_NAMESPACES)
+        if limit == "0":
+            return Problem(
+                f"user namespaces are turned off on {here}: user.max_user_namespaces is 0 "
+                f"(cannot {said})",
+                "allow them with sysctl -w user.max_user_namespaces=15000 (as root)",
+            )
+        return Problem(
+            f"no user namespace is left on {here}: the limit user.max_user_namespaces "
+            f"({limit or '?'}, here or in an enclosing namespace) is used up (cannot {said})",
+            "raise it with sysctl -w user.max_user_namespaces=<more> (as root)",
+        )
+    if step == "unshare" and number in (errno.EPERM, errno.EACCES):
+        if _seccomp_filtered():
+            return Problem(
+                f"a seccomp filter forbids unshare(2) here, as Docker's default profile does "
+                f"(cannot {said})",
+                "run the container with --security-opt seccomp=unconfined (or a profile "
+                "allowing unshare), or --cap-add SYS_ADMIN",
+            )
+        if _read_text(_DEBIAN_SWITCH) == "0":
+            return Problem(
+                f"unprivileged user namespaces are turned off: "
+                f"kernel.unprivileged_userns_clone is 0 (cannot {said})",
+                "allow them with sysctl -w kernel.unprivileged_userns_clone=1 (as root)",
+            )
+    if step in ("unshare", "mount", "shm", "loopback") and _read_text(_APPARMOR_SWITCH) == "1":
+        return Problem(
+            f"AppArmor restricts unprivileged user namespaces "
+            f"(kernel.apparmor_restrict_unprivileged_userns=1) and gives this program no "
+            f"capabilities in one (cannot {said})",
+            "allow this Python in an AppArmor profile with the userns rule, or "
+            "sysctl -w kernel.apparmor_restrict_unprivileged_userns=0 (as root)",
+        )
+    if step == "unshare" and number == errno.EINVAL:
+        return Problem(
+            f"this kernel has no user or network namespaces (cannot {said})",
+            "use a kernel built with CONFIG_USER_NS and CONFIG_NET_NS",
+        )
+    return Problem(f"cannot {said}", "allow user namespaces for this user here")
+
+
+def problem(in_process: bool = False) -> Problem | None:
+    """Why namespaces cannot be had for a test here, or None when they can.
+
+    ``in_process``: the work runs in this very process (the pytest plugin), which must
+    then have no threads too.
+    """
+    if in_process and threads() > 1:
+        return explain(NamespaceError("threads", errno.EINVAL))
+    found = probe()
+    return None if found is None else explain(found)
+
+
+def describe_user() -> str:
+    """Who the test is in its user namespace: the caller's own uid and gid."""
+    return f"uid {os.geteuid()}, gid {os.getegid()}"
+
+
+__all__ = [
+    "FLAGS",
+    "LOOPBACK_FLAGS",
+    "NamespaceError",
+    "Problem",
+    "enter_here",
+    "explain",
+    "probe",
+    "problem",
+    "spawn",
+    "threads",
+    "write_maps",
+]
