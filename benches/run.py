@@ -35,6 +35,9 @@ from pathlib import Path
 import contention
 import cpu_load
 import exhaustion
+import html_report
+import import_costs
+import namespace_mode
 import output_volume
 import overhead
 import preset
@@ -72,6 +75,9 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "wave": wave_of_tests.run,
     "preset": preset.run,
     "cpu_load": cpu_load.run,
+    "html_report": html_report.run,
+    "imports": import_costs.run,
+    "namespace": namespace_mode.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"

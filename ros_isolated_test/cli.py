@@ -20,6 +20,7 @@ from ros_isolated_test.runner.settings import (
     DEFAULT_WAIT_TIMEOUT,
     DISABLE_VAR,
     DISCOVERY_RANGE_ENV,
+    ISOLATION_ENV,
     LOCK_DIR_ENV,
     MAX_RERUNS,
     POOL_ENV,
@@ -29,16 +30,21 @@ from ros_isolated_test.runner.settings import (
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import NoReturn
+
     from ros_isolated_test.domain_coordinator.status import HeldDomain
+    from ros_isolated_test.xunit.report import FileReport
 
 EXIT_CODES_HELP = """\b
 Exit codes:
   N        the command's own exit code (0 passed); after reruns, the last attempt's
+           (1 when a case failed and was then not run again)
   128+N    the command was killed by signal N, or the runner got signal N
   1        the test's result file reports failures, or the result file or
            --output-file could not be fully written
   2        nothing was run: bad arguments or settings, ROS_DOMAIN_ID (or
-           GZ_PARTITION, IGN_PARTITION) was preset,
+           GZ_PARTITION, IGN_PARTITION) was preset, --isolation namespace
+           cannot be had here or is contradicted (SUBNET, remote static peers),
            the --junit-xml or --output-file path cannot be used, --resources
            asks for more than the capacity, or runners disagree on a capacity
   3        nothing was run: no domain ID (or the resources asked for) came free
@@ -61,6 +67,8 @@ Environment:
                                      give every runner the same
   {GZ_PARTITION_ENV}=off set no Gazebo partition (GZ_PARTITION, IGN_PARTITION)
                                      per test, and refuse no preset one
+  {ISOLATION_ENV}=namespace|auto  the test's own network, /dev/shm and
+                                     IPC too, never waiting for an ID (run --isolation)
   {DISABLE_VAR}=1                 run without reserving an ID (loudly)
 """
 
@@ -190,7 +198,8 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     metavar="N",
     help=f"Run a test that failed (exit code, failures in its result, timeout) again, up to N "
     f"(at most {MAX_RERUNS}) more times, each on a freshly reserved ID; every attempt is kept "
-    f"in the result file, the exit code is the last attempt's. Default: {RERUNS_ENV}, else 0.",
+    f"in the result file, the exit code is the last attempt's (1 when a case failed and was then "
+    f"not run again). Default: {RERUNS_ENV}, else 0.",
 )
 @click.option(
     "--resources",
@@ -199,6 +208,15 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     f"cpu=2,mem=4G,gpu=1; mem in K, M, G, T): runners wait, first come first served, until "
     f"they are free, machine-wide. Capacity: {CAPACITY_ENV}, else the CPUs this runner may "
     f"use, MemTotal, and 1 of any other name (exclusive). Default: {RESOURCES_ENV}, else none.",
+)
+@click.option(
+    "--isolation",
+    metavar="[domain|namespace|auto]",
+    help="domain: a reserved ROS_DOMAIN_ID. namespace: also Linux namespaces of the test's own "
+    "(network with loopback only, a private /dev/shm, IPC, as the same user), so fixed ports "
+    "and shared memory cannot collide either; never waits for an ID (runs unreserved when "
+    "none is free); refused where user namespaces are not allowed. auto: namespace where "
+    f"allowed, else domain. Default: {ISOLATION_ENV}, else domain.",
 )
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
@@ -211,6 +229,7 @@ def run(
     discovery_range: str | None,
     rerun_failures: int | None,
     resources: str | None,
+    isolation: str | None,
     command: tuple[str, ...],
 ) -> None:
     """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
@@ -229,6 +248,7 @@ def run(
             discovery_range=discovery_range,
             reruns=rerun_failures,
             resources=resources,
+            isolation=isolation,
         )
     except settings.SettingsError as error:
         sys.exit(session.report_usage_error(str(error), junit_xml))
@@ -260,6 +280,59 @@ def runner_path() -> None:
     click.echo(str(Path(str(script)).resolve()))
 
 
+#: The CMake file of ``cmake-include``, with the CMake package (pip: <prefix>/share/...).
+CMAKE_INCLUDE = Path("share/ros_isolated_test/cmake/ros_isolated_test_project_include.cmake")
+
+
+def _cmake_include() -> Path | None:
+    """Where this installation's CMake include is, or None when it is not installed.
+
+    pip puts share/ beside the lib/ holding the package (a venv, --prefix, --user); an
+    editable install or a checkout has only the package's own cmake/ folder. Not resolved:
+    a linked share/ (scripts/setup.sh) keeps the prefix whose bin/ the CMake files use.
+    """
+    package = Path(str(resources.files("ros_isolated_test")))
+    candidates = [parent / CMAKE_INCLUDE for parent in package.parents]
+    candidates.append(package / "cmake" / CMAKE_INCLUDE.name)
+    return next((path.absolute() for path in candidates if path.is_file()), None)
+
+
+@cli.command("cmake-include")
+@click.option(
+    "--colcon-defaults",
+    is_flag=True,
+    help="Print a colcon defaults file (COLCON_DEFAULTS_FILE) that passes it to every build.",
+)
+def cmake_include(colcon_defaults: bool) -> None:
+    """Print the path of the CMake file that isolates every ament_cmake package's tests.
+
+    \b
+    Nothing edited; each package's CMake cache keeps it for later builds:
+      colcon build --cmake-args -DCMAKE_PROJECT_INCLUDE=$(ros-isolated-test cmake-include)
+      ros-isolated-test cmake-include --colcon-defaults > isolated.yaml
+      COLCON_DEFAULTS_FILE=isolated.yaml colcon build
+    Off: --cmake-args -DROS_ISOLATED_TEST_ALL=OFF, or -UCMAKE_PROJECT_INCLUDE to drop it.
+    """  # noqa: D301 (click reads a backspace, not a backslash, as "keep these lines")
+    path = _cmake_include()
+    if path is None:
+        click.echo(
+            f"ros-isolated-test: error: the CMake files are not installed ({CMAKE_INCLUDE} "
+            "beside this package); reinstall ros-isolated-test with pip",
+            err=True,
+        )
+        sys.exit(2)
+    if not colcon_defaults:
+        click.echo(str(path))
+        return
+    argument = json.dumps(f"-DCMAKE_PROJECT_INCLUDE={path}")  # JSON strings are YAML's too
+    click.echo(
+        "# colcon defaults (COLCON_DEFAULTS_FILE): ros-isolated-test isolates the tests of\n"
+        "# every ament_cmake package colcon builds. A --cmake-args given on the command line\n"
+        "# replaces this list: name the include there too.\n"
+        f"build:\n  cmake-args:\n    - {argument}"
+    )
+
+
 @cli.command()
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of a table.")
 def status(as_json: bool) -> None:
@@ -272,7 +345,9 @@ def status(as_json: bool) -> None:
     port 32768+ID is bound: upstream's domain_coordinator, Kilted's rmw_test_fixture
     or another program), "participant" (a DDS participant outside any runner is
     bound to the ID's UDP ports, whoever started it and however it chose the ID),
-    "survivor" (a process of an earlier test that its runner could not end) or
+    "survivor" (a process of an earlier test that its runner could not end, or that a
+    killed runner left, named in a block record; listed once, though its environment
+    also carries the ID) or
     "squatter" (a live process has ROS_DOMAIN_ID=<id> in its environment without
     holding it: a test that outlived a killed runner, a shell's export). The
     coordinator skips all of them; squatters once their ID's last holder died holding
@@ -291,7 +366,8 @@ def status(as_json: bool) -> None:
 
     try:
         # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.
-        config = settings.read(reruns=0, resources="")
+        # Nor the isolation mode, which only the runs read.
+        config = settings.read(reruns=0, resources="", isolation=settings.DEFAULT_ISOLATION)
     except settings.SettingsError as error:
         click.echo(f"ros-isolated-test: error: {error}", err=True)
         sys.exit(2)
@@ -412,13 +488,22 @@ def _print_held(held: list[HeldDomain]) -> None:
 )
 @click.option("--verbose", "-v", is_flag=True, help="List each failure with its message.")
 @click.option("--json", "as_json", is_flag=True, help="Print the same as JSON.")
-def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
+@click.option(
+    "--html",
+    "html_file",
+    type=click.Path(path_type=Path),
+    help="Also write one self-contained page (with a timeline of every attempt) to this file.",
+)
+def report(paths: tuple[Path, ...], verbose: bool, as_json: bool, html_file: Path | None) -> None:
     """Summarise the xUnit result files under PATHS (default: build).
 
     Prints each file's counts and the total, like `colcon test-result --all`, counted
     from the test cases themselves. Reads canonical files and raw gtest, pytest,
-    launch_testing, unittest-xml-reporting and ctest files alike; a broken file counts
-    as an error. Exits 1 when anything failed or errored.
+    launch_testing, unittest-xml-reporting and ctest files alike; a broken file, or a
+    folder it cannot read, counts as an error. Exits 1 when anything failed or errored.
+    With --html FILE it also writes one page for them all, to open in a browser
+    offline: totals, failures first, flaky cases, every case by package and suite, and
+    a timeline of every attempt on its domain ID (exit 2 when FILE cannot be written).
     """
     from ros_isolated_test.xunit import report as reporting
 
@@ -427,12 +512,9 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
         if not default.exists():
             raise click.UsageError("no PATHS given and no 'build' folder here; name a folder")
         paths = (default,)
-    reports = [
-        found
-        for path in reporting.result_files(paths)
-        if (found := reporting.report_file(path)) is not None
-    ]
-    # A flaky case (passed after failing) is listed apart and never fails the report.
+    # A folder it cannot read is an error; a flaky case (passed after failing) is listed
+    # apart and never fails the report, one that failed and was then not run always does.
+    reports = reporting.reports(paths) if html_file is None else _html_report(paths, html_file)
     if as_json:
         click.echo(reporting.as_json(reports))
     else:
@@ -440,6 +522,25 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool) -> None:
     totals = reporting.totals(reports)
     if totals["errors"] or totals["failures"]:
         sys.exit(1)
+
+
+def _html_report(paths: tuple[Path, ...], destination: Path) -> list[FileReport]:
+    """Write the page (read once, for it and the text); a page that cannot be written: exit 2."""
+    from ros_isolated_test import atomic_file
+    from ros_isolated_test.xunit import html_report
+
+    try:
+        return html_report.write(paths, destination)
+    except OSError as error:
+        fix = "choose a writable file path"
+        if isinstance(error, atomic_file.NotReplaceableError):
+            fix = "name a regular file instead, or /dev/null to discard the page"
+        click.echo(
+            f"ros-isolated-test: error: cannot write --html {destination}: "
+            f"{error.strerror or error}; {fix}",
+            err=True,
+        )
+        sys.exit(2)
 
 
 @cli.command()
@@ -459,17 +560,34 @@ def normalise(source: Path, output: Path | None, package_name: str, test_name: s
     broken ones), as the runner does after every test; for tests that did not run
     through it. Exits 1 when the result reports failures or errors, like `report`.
     """
-    from ros_isolated_test.atomic_file import write_atomically
+    from ros_isolated_test import atomic_file
     from ros_isolated_test.xunit import result_file
 
+    # /dev/null keeps nothing; any other device node, FIFO or socket is never replaced.
+    discard = output is not None and atomic_file.discards(output)
+    kind = None if output is None or discard else atomic_file.special_kind(output)
+    if kind is not None:
+        _normalise_error(f"cannot use -o {output}: it is {kind}; {atomic_file.SPECIAL_FIX}")
     name = test_name or test_name_of(source)
     data, failed = result_file.normalise_file(source, package_name, name)
     if output is None:
         click.echo(data.decode("utf-8"), nl=False)
-    else:
-        write_atomically(output, data)
+    elif not discard:
+        try:
+            atomic_file.write_atomically(output, data)
+        except OSError as error:  # one that became special meanwhile, a full disk
+            fix = "choose a writable file path"
+            if isinstance(error, atomic_file.NotReplaceableError):
+                fix = atomic_file.SPECIAL_FIX
+            _normalise_error(f"cannot write -o {output}: {error.strerror}; {fix}")
     if failed:
         sys.exit(1)
+
+
+def _normalise_error(message: str) -> NoReturn:
+    """`normalise`'s one-line error: its output path cannot be used (exit 2)."""
+    click.echo(f"ros-isolated-test: error: {message}", err=True)
+    sys.exit(2)
 
 
 def main() -> None:

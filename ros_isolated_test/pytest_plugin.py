@@ -255,6 +255,10 @@ def _for_each_worker(state: _State, policy: Policy, config_settings: Settings) -
     if config_settings.resources:
         each.append(describe(config_settings.resources))
     state.header.append(f"ros-isolated-test: each xdist worker reserves {' and '.join(each)}")
+    if policy.fallback is not None:  # isolation auto: the workers cannot enter namespaces
+        state.header.append(
+            f"ros-isolated-test: isolation auto: by the domain ID alone, {policy.fallback}"
+        )
 
 
 def _holding(

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs everything the demo and the test suite need: system build tools (cmake, a C++
-# compiler, googletest, node, Gazebo's transport tools) from Debian when missing,
-# xunit-viewer from npm into node_modules, then ros-isolated-test with real ROS 2 Jazzy,
-# ament_cmake and colcon from PyPI into .venv, and with ROS 2 Kilted into .venv-kilted.
+# compiler, googletest, node, Gazebo's transport tools, docker.io and debootstrap) from
+# Debian when missing, xunit-viewer from npm into node_modules, then ros-isolated-test
+# with real ROS 2 Jazzy, ament_cmake and colcon from PyPI into .venv, and with ROS 2
+# Kilted into .venv-kilted.
 # Safe to run again: it only installs again when pyproject.toml changed.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -36,6 +37,13 @@ ign_tool() {
     command -v ign-transport-topic >/dev/null 2>&1
 }
 ign_tool || missing+=(ignition-transport-cli)
+# A Docker engine and debootstrap: the real-engine tier builds the project's image on a
+# stand-in base it makes itself. Debian's docker.io only where no engine is at hand.
+docker_engine() { command -v dockerd >/dev/null 2>&1 || docker info >/dev/null 2>&1; }
+docker_engine || missing+=(docker.io)
+command -v debootstrap >/dev/null 2>&1 || missing+=(debootstrap)
+# Headless Chromium: the tests open `report --html`'s page as a person would.
+command -v chromium >/dev/null 2>&1 || missing+=(chromium)
 if ((${#missing[@]})); then
   echo "setup: installing system packages for: ${missing[*]}"
   sudo=""
@@ -44,6 +52,9 @@ if ((${#missing[@]})); then
   packages=(cmake make g++ util-linux libgtest-dev libgmock-dev google-mock)
   command -v npm >/dev/null 2>&1 || packages+=(nodejs npm)
   ign_tool || packages+=(ignition-transport-cli)
+  docker_engine || packages+=(docker.io)
+  command -v debootstrap >/dev/null 2>&1 || packages+=(debootstrap)
+  command -v chromium >/dev/null 2>&1 || packages+=(chromium)
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${packages[@]}" >/dev/null
 fi
 
@@ -89,6 +100,29 @@ if [[ ${ROS_ISOLATED_TEST_NO_KILTED:-} != 1 && ! -f $kilted_stamp ]]; then
   .venv-kilted/bin/ros-isolated-test --help >/dev/null
   rm -f .venv-kilted/.installed-*
   touch "$kilted_stamp"
+fi
+
+# What a Jazzy user on Ubuntu 24.04 has, in .venv-distro: ROS 2 Jazzy (the ros extra) and
+# colcon on exactly the setuptools, click, filelock and lxml Ubuntu ships
+# (scripts/ubuntu-24.04-constraints.txt), and NOT this project: tests/test_ros_package.py
+# builds it there as a package of a colcon workspace. ROS_ISOLATED_TEST_NO_DISTRO=1 leaves
+# it out (those tests then say they were skipped).
+constraints=scripts/ubuntu-24.04-constraints.txt
+distro_stamp=.venv-distro/.installed-$(cat pyproject.toml "$constraints" | sha256sum | cut -c1-16)
+if [[ ${ROS_ISOLATED_TEST_NO_DISTRO:-} != 1 && ! -f $distro_stamp ]]; then
+  echo "setup: installing ROS 2 Jazzy and colcon on Ubuntu 24.04's Python packages into .venv-distro (about a minute)"
+  [[ -x .venv-distro/bin/python ]] || "$python" -m venv .venv-distro
+  mapfile -t ros_extra < <(.venv/bin/python -c 'import tomllib
+print("\n".join(tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["ros"]))')
+  log=.venv-distro/install.log
+  if ! { .venv-distro/bin/python -m pip install -q --upgrade pip &&
+         .venv-distro/bin/python -m pip install -q -c "$constraints" -r "$constraints" "${ros_extra[@]}"; } >"$log" 2>&1; then
+    grep -v '^WARNING: Location' "$log" >&2
+    echo "setup: pip install failed (full log: $log)" >&2
+    exit 1
+  fi
+  rm -f .venv-distro/.installed-*
+  touch "$distro_stamp"
 fi
 
 # An editable install does not copy data files: CMake's find_package(ros_isolated_test)

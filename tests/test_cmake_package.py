@@ -250,7 +250,7 @@ def test_no_runner_is_a_clear_configure_error(tmp_path: Path) -> None:
     assert done.returncode != 0
     message = " ".join(done.stderr.split())
     assert f"'{missing} runner-path' did not print the path of the RUNNER" in message, message
-    assert "pip install ros-isolated-test" in message, message
+    assert "see Install it in its README" in message, message
     assert "-DROS_ISOLATED_TEST_EXECUTABLE=" in message, message
 
 

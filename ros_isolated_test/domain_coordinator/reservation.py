@@ -96,6 +96,7 @@ class Reservation:
         "released",
         "unclean",
         "waited",
+        "waited_resources",
     )
 
     def __init__(
@@ -118,8 +119,11 @@ class Reservation:
         self.unclean = False
         #: The hold of the resources taken with the ID (``holdings``), given back with it.
         self.holding: Ticket | None = None
-        #: Seconds spent waiting for the ID (and the resources) before it was held.
+        #: Seconds spent waiting for the ID (and the resources) before it was held; of
+        #: those, the ones when the resources asked for were short (the rest: no ID free,
+        #: or an earlier waiter's turn).
         self.waited = 0.0
+        self.waited_resources = 0.0
 
     def __repr__(self) -> str:
         return f"Reservation(domain_id={self.domain_id}, released={self.released})"
@@ -184,11 +188,11 @@ class Reservation:
 class ResourceHold:
     """Resources held without a domain ID (isolation disabled): released like a reservation."""
 
-    __slots__ = ("holding", "released", "waited")
+    __slots__ = ("holding", "released", "waited", "waited_resources")
 
     def __init__(self, holding: Ticket) -> None:
         self.holding = holding
-        self.waited = 0.0
+        self.waited = self.waited_resources = 0.0
         self.released = False
 
     def block_for(self, processes: Iterable[proc.Stat]) -> Path:
@@ -404,6 +408,19 @@ class DomainCoordinator:
                 os.close(lock_fd)
         return None
 
+    def reserve_if_free(self, command: Sequence[str]) -> Reservation | None:
+        """An ID free now, held; None when none is, or an earlier waiter is to have it.
+
+        Never waits, and never takes an ID a queued runner waits for: for a test in
+        namespaces of its own, which runs whether it gets one or not (the ID only keeps
+        ``status`` and its result meaningful). Holds no resources (see ``hold_resources``).
+        """
+        ensure_lock_dir(self.lock_dir)
+        queue = Queue(self.lock_dir)
+        if queue.waiting() and self._id_ahead(queue, None):
+            return None
+        return self.try_reserve(command)
+
     def acquire(
         self,
         command: Sequence[str],
@@ -446,6 +463,10 @@ class DomainCoordinator:
         if wait_timeout <= 0:
             raise self._gave_up("", 0.0)
         told = 0.0
+        # Of the wait, the time the resources asked for were short (a runner that has no
+        # ID waits for an ID otherwise): each pause counts as the try before it found.
+        short = 0.0
+        was_short, mark = self._short is not None, start
         extra = ""
         if self.resources:
             extra = holdings.ticket_fields(self.resources, self.capacity, domain)
@@ -457,8 +478,14 @@ class DomainCoordinator:
                 # Without a ticket (none could be made) a runner waits out of order.
                 name = ticket.name if ticket is not None else ""
                 taken, turn = self._attempt(command, queue, name, domain)
+                now = time.monotonic()
+                if was_short:
+                    short += now - mark
+                was_short, mark = self._short is not None, now
                 if taken is not None:
-                    taken.waited = time.monotonic() - start
+                    taken.waited = now - start
+                    # Without an ID, all of the wait was for the resources.
+                    taken.waited_resources = min(short, taken.waited) if domain else taken.waited
                     return taken
                 if waited >= wait_timeout:
                     raise self._gave_up("waited", waited)

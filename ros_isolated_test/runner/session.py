@@ -15,6 +15,7 @@ import errno
 import os
 import shlex
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -33,7 +34,7 @@ from ros_isolated_test.runner import environment, exit_codes, partition, setting
 from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.xunit.model import Case, Outcome
-from ros_isolated_test.xunit.result_file import NO_RESULT, ResultFile
+from ros_isolated_test.xunit.result_file import NO_RESULT, ResultFile, timeline_properties
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -219,6 +220,8 @@ def _guarded(
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
     except CapacityConflictError as error:
         return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
+    except environment.RefusedError as refusal:  # namespaces that cannot be had
+        return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     except Interrupted as interruption:
         name = exit_codes.signal_name(interruption.signum)
         message = f"interrupted by {name} before the test started (it never ran)"
@@ -269,9 +272,10 @@ def _attempt(
     """
     with isolation(policy, config, command, capture.note) as held:
         domain_id = None if held is None else held.domain_id
+        reserved = held is None or held.reserved
         if domain_id is not None:
-            capture.line(header_line(policy, domain_id))
-        lines, properties = summary(policy, domain_id, config)
+            capture.line(header_line(policy, domain_id, reserved))
+        lines, properties = summary(policy, domain_id, config, reserved)
         if held is not None and held.resources:
             line, more = resources_summary(held, config)
             lines.insert(0, line)
@@ -281,6 +285,7 @@ def _attempt(
         result.properties.update(properties)
         env = policy.env if domain_id is None else policy.for_domain(domain_id)
         capture.note(f"invoking in '{os.getcwd()}': {shlex.join(command)}")
+        started = time.time()
         outcome = supervisor.run(
             command,
             env,
@@ -288,7 +293,16 @@ def _attempt(
             request.timeout,
             request.kill_grace,
             on_start=guard.start,
+            namespaces=policy.namespaces,
         )
+        if policy.namespaces and _namespaces_refused(outcome):
+            # The test never ran: its start found namespaces forbidden (no probe before).
+            assert outcome.start_error is not None
+            raise policy.refusal(outcome.start_error)
+        # When it ran, what it waited for first and on which pool: the report's timeline.
+        waits = (0.0, 0.0) if held is None else (held.waited, held.waited_resources)
+        pool = config.pool if domain_id is not None else ()
+        result.properties.update(timeline_properties(started, time.time(), *waits, pool))
         if held is not None:
             held.survivors = outcome.survivors  # what blocks the ID: as named below
         # Named before the ID is released: the block note (isolation) follows.
@@ -302,6 +316,13 @@ def _attempt(
         if survivors:
             result.properties["surviving_processes"] = ", ".join(survivors)
     return outcome, domain_id
+
+
+def _namespaces_refused(outcome: supervisor.Outcome) -> bool:
+    """Whether the test could not start because its namespaces could not be made."""
+    from ros_isolated_test.process.namespace import NamespaceError
+
+    return isinstance(outcome.start_error, NamespaceError)
 
 
 #: The suite property saying how many reruns a failed test was allowed.
@@ -363,7 +384,12 @@ def _reruns(
                 raise Interrupted(guard.late)
             command = _command_of(request, config, result, number)
             outcome, domain_id = _attempt(request, command, policy, config, result, capture, guard)
-        except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
+        except (
+            PoolExhaustedError,
+            LockDirError,
+            CapacityConflictError,
+            environment.RefusedError,
+        ) as error:
             capture.note(f"attempt {number} did not run: {error}")
             result.properties["rerun_not_run"] = str(error)
             break
@@ -422,15 +448,27 @@ def _placeholder_merge(suites: list[Suite]) -> Callable[[Suite], Suite]:
     return merge
 
 
-def header_line(policy: environment.Policy, domain_id: int) -> str:
+def header_line(policy: environment.Policy, domain_id: int, reserved: bool = True) -> str:
     """The runner's first line: the test's domain ID, and its Gazebo partition beside it.
 
-    Starts as upstream's does (``Running with ROS_DOMAIN_ID <id>``): what greps for it finds it.
+    Starts as upstream's does (``Running with ROS_DOMAIN_ID <id>``): what greps for it
+    finds it. Then, where isolation is not the default, what keeps the test apart:
+    its namespaces (and whether the ID is its own), or auto's fall-back to the ID alone.
     """
     gz_name = policy.partition_for(domain_id)
-    if gz_name is None:
-        return f"Running with ROS_DOMAIN_ID {domain_id}"
-    return f"Running with ROS_DOMAIN_ID {domain_id} (Gazebo partition {gz_name})"
+    line = f"Running with ROS_DOMAIN_ID {domain_id}"
+    if gz_name is not None:
+        line += f" (Gazebo partition {gz_name})"
+    if policy.namespaces and reserved:
+        line += ", in namespaces of its own"
+    elif policy.namespaces:
+        line += (
+            f", in namespaces of its own; ID {domain_id} is not reserved (no ID of the pool "
+            "is free): the namespaces isolate the test"
+        )
+    elif policy.fallback is not None:
+        line += "; isolation auto: by the domain ID alone, no namespaces (see below)"
+    return line
 
 
 def resources_summary(held: Held, config: settings.Settings) -> tuple[str, dict[str, str]]:
@@ -453,12 +491,16 @@ NOTES_SEPARATOR = " | "
 
 
 def summary(
-    policy: environment.Policy, domain_id: int | None, config: settings.Settings | None = None
+    policy: environment.Policy,
+    domain_id: int | None,
+    config: settings.Settings | None = None,
+    reserved: bool = True,
 ) -> tuple[list[str], dict[str, str]]:
     """What a run on ``domain_id`` (None: isolation disabled) says first, and its properties.
 
     One wording for the runner's output and the pytest plugin's header. ``config``'s
     notes concern the pool, so they are said only when an ID was handed out.
+    ``reserved``: False for a test in namespaces that runs on an ID it does not hold.
     """
     lines: list[str] = []
     properties: dict[str, str] = {}
@@ -466,12 +508,16 @@ def summary(
         properties["ros_domain_id"] = str(domain_id)
         if policy.discovery is not None:
             lines.append(policy.discovery.describe())
-            lines.extend(policy.discovery.warnings)
+            if not policy.namespaces:  # in namespaces, static peers are loopback only
+                lines.extend(policy.discovery.warnings)
             properties.update(policy.discovery.properties())
         # Gazebo's transport ignores the domain: its own partition, said beside it.
         gz_name = policy.partition_for(domain_id)
         lines.append(partition.describe(gz_name))
         properties[partition.PROPERTY] = gz_name or f"not set ({partition.OPT_OUT_ENV}=off)"
+        more, isolated = isolation_summary(policy, domain_id, reserved)
+        lines.extend(more)
+        properties.update(isolated)
         if config is not None and config.notes:
             lines.extend(config.notes)
             properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
@@ -482,6 +528,44 @@ def summary(
         properties[partition.PROPERTY] = preset[0] if preset else "unset"
     lines.extend(policy.notes)
     return lines, properties
+
+
+def isolation_summary(
+    policy: environment.Policy, domain_id: int, reserved: bool
+) -> tuple[list[str], dict[str, str]]:
+    """The lines and properties saying how the test is kept apart, unless by default.
+
+    Domain isolation asked for by nobody (the default) says nothing new: results look
+    as they always did.
+    """
+    if policy.namespaces:
+        from ros_isolated_test.process import namespace
+
+        lines = [
+            "isolation namespace: network (loopback only), mount (a private /dev/shm) and "
+            f"IPC namespaces of its own, in a user namespace as {namespace.describe_user()}: "
+            "nothing it binds or sends reaches another test"
+        ]
+        mode = "namespace" if policy.mode == "namespace" else "namespace (auto)"
+        properties = {"isolation": mode}
+        if reserved:
+            properties["ros_domain_id_reserved"] = "yes"
+        else:
+            why = "no ID of the pool is free (in use, or waited for by queued runners)"
+            lines.append(
+                f"ROS_DOMAIN_ID {domain_id} is not reserved: {why}; the test runs at once "
+                "on it, isolated by its namespaces"
+            )
+            properties["ros_domain_id_reserved"] = f"no: {why}; the namespaces isolate the test"
+        return lines, properties
+    if policy.fallback is not None:
+        return (
+            [f"isolation auto: by the domain ID alone, {policy.fallback}"],
+            {"isolation": f"domain (auto: {policy.fallback})"},
+        )
+    if policy.mode != "domain":
+        return [], {"isolation": policy.mode}
+    return [], {}
 
 
 def leftover_note(leftover: str) -> str:
@@ -552,16 +636,26 @@ def _interruptible(guard: _Guard) -> Iterator[None]:
 class Held:
     """The ID held for the work, and what of the work's processes outlived it."""
 
-    __slots__ = ("domain_id", "resources", "survivors", "waited")
+    __slots__ = ("domain_id", "reserved", "resources", "survivors", "waited", "waited_resources")
 
     def __init__(
-        self, domain_id: int | None, resources: dict[str, int] | None = None, waited: float = 0.0
+        self,
+        domain_id: int | None,
+        resources: dict[str, int] | None = None,
+        waited: float = 0.0,
+        waited_resources: float = 0.0,
+        reserved: bool = True,
     ) -> None:
         #: None only for resources held with isolation disabled.
         self.domain_id = domain_id
-        #: The machine resources held with it ({} for none), and how long the wait was.
+        #: False for a test in namespaces of its own that found no ID free: it runs on
+        #: ``domain_id`` without holding it (its namespaces keep it apart).
+        self.reserved = reserved
+        #: The machine resources held with it ({} for none), how long the wait was, and
+        #: how much of it the resources were short (the rest: no ID).
         self.resources = resources or {}
         self.waited = waited
+        self.waited_resources = waited_resources
         #: The supervisor's survivors once it returned: the authoritative list, the one
         #: the result names. None until then: a run that ended otherwise scans afresh.
         self.survivors: Sequence[proc.Stat] | None = None
@@ -584,8 +678,12 @@ def isolation(
     Either way, what survives keeps the ID blocked, and only then is the ID released.
     The resources ``config`` asks for are held with the ID, and without one when
     isolation is disabled (a GPU is as scarce either way); survivors keep them held too.
-    Raises PoolExhaustedError or LockDirError when no ID can be had,
-    CapacityConflictError when runners disagree.
+    In namespace mode no ID is waited for (one free is held, else the pool's first is
+    used unreserved: ``held.reserved``); resources are waited for as ever. Work in this
+    very process enters the namespaces here, once the reservation has looked at the
+    host's network (ports, participants). Raises PoolExhaustedError or LockDirError when
+    no ID can be had, CapacityConflictError when runners disagree, NamespaceError when
+    this process cannot enter its namespaces.
     """
     if not policy.isolate and not config.resources:
         yield None
@@ -597,17 +695,12 @@ def isolation(
         adopted = not reaper.is_subreaper() and reaper.become_subreaper()
         others = supervisor.existing_children()
     try:
-        coordinator = DomainCoordinator(
-            config.lock_dir, config.pool, config.resources, config.capacity
-        )
-        taken: Reservation | ResourceHold
-        if policy.isolate:
-            taken = coordinator.acquire(command, config.wait_timeout, note)
-            held = Held(taken.domain_id, config.resources, taken.waited)
-        else:
-            taken = coordinator.hold_resources(command, config.wait_timeout, note)
-            held = Held(None, config.resources, taken.waited)
+        held, taken = _take(policy, config, command, note)
         try:
+            if policy.namespaces and sweep_grace is not None:
+                from ros_isolated_test.process import namespace
+
+                namespace.enter_here()
             yield held
         finally:
             try:
@@ -624,9 +717,58 @@ def isolation(
             reaper.stop_subreaper()
 
 
-def _block_survivors(
-    taken: Reservation | ResourceHold, held: Held, note: Callable[[str], None]
-) -> None:
+class _Taken:
+    """What a run holds: an ID, resources, or (namespace mode) each apart; let go together."""
+
+    __slots__ = ("parts",)
+
+    def __init__(self, *parts: Reservation | ResourceHold) -> None:
+        self.parts = list(parts)
+
+    def block_for(self, processes: Sequence[proc.Stat]) -> Path | None:
+        """Keep every part held while ``processes`` live; the first record (None: nothing held)."""
+        records = [part.block_for(processes) for part in self.parts]
+        return records[0] if records else None
+
+    def release(self) -> None:
+        for part in reversed(self.parts):
+            part.release()
+
+
+def _take(
+    policy: environment.Policy,
+    config: settings.Settings,
+    command: Sequence[str],
+    note: Callable[[str], None],
+) -> tuple[Held, _Taken]:
+    """Reserve what the run needs: an ID (waiting, unless in namespaces), the resources."""
+    coordinator = DomainCoordinator(config.lock_dir, config.pool, config.resources, config.capacity)
+    if not policy.isolate:
+        hold = coordinator.hold_resources(command, config.wait_timeout, note)
+        return Held(None, config.resources, hold.waited, hold.waited_resources), _Taken(hold)
+    if not policy.namespaces:
+        taken = coordinator.acquire(command, config.wait_timeout, note)
+        held = Held(taken.domain_id, config.resources, taken.waited, taken.waited_resources)
+        return held, _Taken(taken)
+    parts = _Taken()
+    waited = (0.0, 0.0)
+    try:
+        if config.resources:
+            hold = coordinator.hold_resources(command, config.wait_timeout, note)
+            parts.parts.append(hold)
+            waited = (hold.waited, hold.waited_resources)
+        reservation = DomainCoordinator(config.lock_dir, config.pool).reserve_if_free(command)
+    except BaseException:
+        parts.release()
+        raise
+    if reservation is None:
+        # Any ID will do in a network of its own: the pool's first, said to be shared.
+        return Held(config.pool[0], config.resources, *waited, reserved=False), parts
+    parts.parts.append(reservation)
+    return Held(reservation.domain_id, config.resources, *waited), parts
+
+
+def _block_survivors(taken: _Taken, held: Held, note: Callable[[str], None]) -> None:
     """What of the work's tree still lives keeps the ID and the resources until it is gone.
 
     Not ours to kill, or stuck in the kernel. The supervisor's own list when it returned
@@ -640,8 +782,11 @@ def _block_survivors(
         return
     from ros_isolated_test.domain_coordinator.resources import describe
 
+    if not taken.parts:
+        return  # nothing held (namespace mode, no ID free): named above, nothing to keep
     names = ", ".join(survivor.describe() for survivor in survivors)
-    kept = [f"ROS_DOMAIN_ID {held.domain_id}"] if held.domain_id is not None else []
+    own_id = held.domain_id is not None and held.reserved
+    kept = [f"ROS_DOMAIN_ID {held.domain_id}"] if own_id else []
     kept += [describe(held.resources)] if held.resources else []
     what = " and ".join(kept)
     try:
@@ -653,10 +798,8 @@ def _block_survivors(
         )
     else:
         verb = "stays" if len(kept) == 1 else "stay"
-        note(
-            f"{what} {verb} blocked while {names} live ({record.name}); "
-            "see ros-isolated-test status"
-        )
+        where = "" if record is None else f" ({record.name})"
+        note(f"{what} {verb} blocked while {names} live{where}; see ros-isolated-test status")
 
 
 def _conclude(

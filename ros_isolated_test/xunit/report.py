@@ -108,7 +108,11 @@ def report_file(path: Path) -> FileReport | None:
     read = reader.read(path)
     if read.root_tag is not None and not read.is_xunit:
         return None
-    cases = normalise.cases_from(read, None, test_name_of(path))
+    return counted(path, normalise.cases_from(read, None, test_name_of(path)))
+
+
+def counted(path: Path, cases: list[Case]) -> FileReport:
+    """The counts of one file's canonical ``cases``; its failed and flaky ones kept."""
     report = FileReport(path=path, tests=len(cases))
     for case in cases:
         if case.outcome is Outcome.ERROR:

@@ -48,6 +48,47 @@ RESERVE_BYTES = 1024
 #: Properties the stand-in keeps while they fit: how the test ended, and on which ID.
 _STAND_IN_PROPERTIES = ("exit", "exit_code", "signal", "duration", "ros_domain_id")
 _SPACE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+#: Suite properties the report's timeline draws from (one set per attempt; a rerun's
+#: earlier ones as ``attempt_<k>.<name>``): when the command started and ended (local
+#: ISO 8601 to the microsecond, with the zone), the seconds waited before it for an ID
+#: and for the resources asked for, and the pool the ID came from.
+STARTED_AT = "started_at"
+ENDED_AT = "ended_at"
+WAIT_DOMAIN = "wait_domain_seconds"
+WAIT_RESOURCES = "wait_resources_seconds"
+DOMAIN_POOL = "domain_pool"
+
+
+def instant(when: float) -> str:
+    """``when`` as local ISO 8601 to the microsecond, with its zone: ordered across hosts.
+
+    The suite's ``timestamp`` keeps the second and no zone, as the strictest readers
+    want; a timeline of short tests, gathered from several machines, needs both.
+    """
+    local = time.localtime(when)
+    minutes = local.tm_gmtoff // 60
+    sign = "-" if minutes < 0 else "+"
+    hours, minutes = divmod(abs(minutes), 60)
+    micro = min(int(when % 1 * 1_000_000), 999_999)
+    day = time.strftime("%Y-%m-%dT%H:%M:%S", local)
+    return f"{day}.{micro:06d}{sign}{hours:02d}:{minutes:02d}"
+
+
+def timeline_properties(
+    started: float, ended: float, waited: float, waited_resources: float, pool: tuple[int, ...]
+) -> dict[str, str]:
+    """The properties of one attempt for the timeline (see :data:`STARTED_AT`)."""
+    found = {
+        STARTED_AT: instant(started),
+        ENDED_AT: instant(ended),
+        WAIT_DOMAIN: f"{max(waited - waited_resources, 0.0):.3f}",
+        WAIT_RESOURCES: f"{waited_resources:.3f}",
+    }
+    if pool:
+        from ros_isolated_test.domain_coordinator.pool import id_ranges
+
+        found[DOMAIN_POOL] = id_ranges(pool)
+    return found
 
 
 class ResultFile:

@@ -281,6 +281,13 @@ def _kilted() -> str | None:
     return KILTED.missing
 
 
+def _distro_venv() -> str | None:
+    """Ubuntu 24.04's Python packages with ROS 2 Jazzy and colcon (helpers/ros_package.py)."""
+    from helpers.ros_package import distro_venv_problem
+
+    return distro_venv_problem()
+
+
 def _ctest() -> str | None:
     tools = [tool for tool in ("cmake", "ctest") if shutil.which(tool) is None]
     if tools:
@@ -313,6 +320,39 @@ def _ign_transport() -> str | None:
     )
 
 
+def _docker_engine() -> str | None:
+    """A Docker engine answers, or dockerd can run here (root, overlay mounts)."""
+    from helpers import docker_engine
+
+    return docker_engine.missing()
+
+
+def _chromium() -> str | None:
+    """Headless Chromium, to open the report page as a person would (helpers/chromium.py)."""
+    from helpers.chromium import executable
+
+    found = executable()
+    if found is None:
+        return "needs Chromium for the report page (apt install chromium; scripts/setup.sh does)"
+    failed = _run_ok([found, "--headless", "--no-sandbox", "--disable-gpu", "--version"])
+    return None if failed is None else f"{found} does not start: {failed}"
+
+
+#: libseccomp, as Docker links it: a real seccomp filter for the namespace-refusal tests.
+LIBSECCOMP = "libseccomp.so.2"
+
+
+def _seccomp() -> str | None:
+    """libseccomp loads (a test installs a real filter with it, as Docker's profile is one)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(LIBSECCOMP)
+    except OSError as error:
+        return f"needs {LIBSECCOMP} (apt install libseccomp2): {error}"
+    return None
+
+
 ROOT = Capability("root", _root)
 UNSHARE = Capability("unshare", _unshare)
 MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
@@ -334,9 +374,17 @@ BARE_PYTHON = Capability("bare-python3.11", _bare_python)
 TOMLLIB = Capability("tomllib", _tomllib)
 FREE_DISK = Capability("free-disk", _free_disk)
 UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
+#: The distro venv (.venv-distro, made by scripts/setup.sh): Ubuntu 24.04's Python packages.
+DISTRO_VENV = Capability("ubuntu-24.04-venv", _distro_venv)
 #: cmake and ctest, to run a registered test under ctest's TIMEOUT.
 CTEST = Capability("ctest", _ctest)
 #: ROS 2 Kilted's venv (.venv-kilted, made by scripts/setup.sh), for the Kilted tier.
 KILTED = Capability("kilted", _kilted)
 #: Gazebo's transport CLI (Debian's ignition-transport-cli), for the simulation isolation tests.
 IGN_TRANSPORT = Capability("ign-transport", _ign_transport)
+#: A real Docker engine, started by the tier when needed, and what builds the stand-in base.
+DOCKER_ENGINE = Capability("docker-engine", _docker_engine)
+#: Headless Chromium (Debian's chromium), for the report page's tests.
+CHROMIUM = Capability("chromium", _chromium)
+#: libseccomp, to put a process under a real seccomp filter (as Docker's default profile).
+SECCOMP = Capability("seccomp", _seccomp)

@@ -59,7 +59,7 @@ def _import_main() -> "Callable[[], int]":
                 os.execv(interpreter, [interpreter, "-u", os.path.abspath(__file__), *sys.argv[1:]])
         message = (
             f"cannot import ros-isolated-test with {sys.executable} ({error}); install it for "
-            "that Python (python3 -m pip install ros-isolated-test) or point CMake at the "
+            "that Python (see Install it in its README) or point CMake at the "
             "Python it is installed for (-DPython3_EXECUTABLE=...)"
         )
         _write_not_run(sys.argv[1:], message)
