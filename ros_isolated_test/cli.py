@@ -15,7 +15,7 @@ from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURC
 from ros_isolated_test.process.supervisor import KILL_GRACE
 from ros_isolated_test.runner import session, settings
 from ros_isolated_test.runner.partition import OPT_OUT_ENV as GZ_PARTITION_ENV
-from ros_isolated_test.runner.request import Mode, RunRequest, test_name_of
+from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.settings import (
     DEFAULT_WAIT_TIMEOUT,
     DISABLE_VAR,
@@ -568,7 +568,7 @@ def normalise(source: Path, output: Path | None, package_name: str, test_name: s
     kind = None if output is None or discard else atomic_file.special_kind(output)
     if kind is not None:
         _normalise_error(f"cannot use -o {output}: it is {kind}; {atomic_file.SPECIAL_FIX}")
-    name = test_name or test_name_of(source)
+    name = test_name or result_file.test_name_of(source)
     data, failed = result_file.normalise_file(source, package_name, name)
     if output is None:
         click.echo(data.decode("utf-8"), nl=False)

@@ -38,8 +38,6 @@ INI = "ros_isolation"
 #: The session's request of machine resources: the ini option and its command-line twin.
 RESOURCES_INI = "ros_isolated_test_resources"
 RESOURCES_OPTION = "--ros-isolated-test-resources"
-_ON_WORDS = frozenset({"1", "true", "yes", "on"})
-_OFF_WORDS = frozenset({"0", "false", "no", "off"})
 #: Where a worker tells the xdist controller it got no ID (the controller exits with it).
 _ERROR_KEY = "ros_isolation_error"
 #: Options that run no test (as --help): nothing is reserved for them.
@@ -116,14 +114,13 @@ def _requested(config: pytest.Config) -> bool | None:
     option: bool | None = config.getoption("ros_isolation")
     if option is not None:
         return option
+    from ros_isolated_test.switches import NotOnOff, on_off  # imports nothing more
+
     word = str(config.getini(INI)).strip().lower()
-    if word in _ON_WORDS:
-        return True
-    if word in _OFF_WORDS:
-        return False
-    if word not in {"", "auto"}:
-        raise pytest.UsageError(f"ini option {INI}={word!r}: use auto, true or false")
-    return None
+    try:
+        return None if word == "auto" else on_off(word, unset=None)
+    except NotOnOff:
+        raise pytest.UsageError(f"ini option {INI}={word!r}: use auto, true or false") from None
 
 
 def _resources(config: pytest.Config) -> tuple[str, str]:

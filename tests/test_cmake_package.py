@@ -145,13 +145,15 @@ def test_a_runner_of_the_call_own_wins(one_line: PackageBuild, one_line_run: str
     assert not etree.parse(str(result_file)).xpath("//failure | //error"), one_line_run
 
 
-def _configure(tmp_path: Path, body: str, *cmake_args: str) -> subprocess.CompletedProcess[str]:
+def _configure(
+    tmp_path: Path, body: str, *cmake_args: str, ament: str = "find_package(ament_cmake REQUIRED)\n"
+) -> subprocess.CompletedProcess[str]:
     """Configure a tiny ament_cmake project (no build, no tests run) from PATH alone."""
     source = tmp_path / "src"
     source.mkdir(exist_ok=True)
     (source / "CMakeLists.txt").write_text(
         "cmake_minimum_required(VERSION 3.20)\nproject(tiny NONE)\n"
-        "find_package(ament_cmake REQUIRED)\nfind_package(ros_isolated_test 0.1 REQUIRED)\n"
+        f"{ament}find_package(ros_isolated_test 0.1 REQUIRED)\n"
         "enable_testing()\n" + body
     )
     env = path_only_env(installed_prefix(tmp_path))
@@ -242,6 +244,43 @@ def test_the_macros_find_ament_packages_once_for_the_caller(tmp_path: Path) -> N
     assert done.stdout.count("Found ament_cmake_pytest") == 1, done.stdout
     ctest_file = (tmp_path / "build" / "CTestTestfile.cmake").read_text()
     assert ctest_file.count(f'"-u" "{_runner_path()}"') == 2, ctest_file
+
+
+def test_the_macros_read_the_escapes_of_a_call_once(tmp_path: Path) -> None:
+    r"""``"a\\\\b"`` reaches the test as ``a\b``, ``"c\\$d"`` as ``c$d``: read once, as in a macro.
+
+    The one wrapper behind the macros is itself a macro: had it been handed the call's
+    ARGN, CMake would read the escapes a second time (``a\b`` is then an invalid escape,
+    ``c$d`` a variable). The control: ament_add_test itself, a function, reads none.
+    """
+    done = _configure(
+        tmp_path,
+        r"""ros_isolated_add_test(wrapped COMMAND echo "a\\\\b" "c\\$d" "e f")
+ament_add_test(by_hand RUNNER "${ros_isolated_test_RUNNER}" COMMAND echo "a\\\\b" "c\\$d")
+""",
+    )
+    assert done.returncode == 0, done.stderr
+    lines = (tmp_path / "build" / "CTestTestfile.cmake").read_text().splitlines()
+    wrapped = next(line for line in lines if "[=[wrapped]=]" in line)
+    by_hand = next(line for line in lines if "[=[by_hand]=]" in line)
+    assert f'"-u" "{_runner_path()}"' in wrapped, wrapped
+    assert r'"--command" "echo" "a\\b" "c\$d" "e f"' in wrapped, wrapped
+    assert r'"--command" "echo" "a\\\\b" "c\\\$d"' in by_hand, by_hand
+
+
+def test_ros_isolated_add_test_finds_ament_cmake_test_as_the_other_macros_find_theirs(
+    tmp_path: Path,
+) -> None:
+    """A package that never found ament_cmake gets its test, not an unknown-command error."""
+    body = "ros_isolated_add_test(alone COMMAND true)\n"
+    done = _configure(tmp_path, body, ament="")
+    assert done.returncode == 0, done.stderr
+    ctest_file = (tmp_path / "build" / "CTestTestfile.cmake").read_text()
+    assert f'"-u" "{_runner_path()}"' in ctest_file, ctest_file
+    (tmp_path / "control").mkdir()
+    control = _configure(tmp_path / "control", "ament_add_test(alone COMMAND true)\n", ament="")
+    assert control.returncode != 0, control.stdout
+    assert "Unknown CMake command" in control.stderr, control.stderr
 
 
 def test_no_runner_is_a_clear_configure_error(tmp_path: Path) -> None:

@@ -37,8 +37,8 @@ from ros_isolated_test.domain_coordinator import (
     held_domains,
     lock_dir_from_env,
 )
+from ros_isolated_test.domain_coordinator.lock_files import lock_path
 from ros_isolated_test.domain_coordinator.port_guard import PORT_BASE, port_is_taken
-from ros_isolated_test.domain_coordinator.reservation import lock_path
 
 #: Holds an ID with our coordinator until its stdin closes. argv: lock dir, pool IDs.
 HOLD_SCRIPT = """

@@ -188,14 +188,6 @@ def test_a_planted_command_forges_no_line_in_status_or_the_wait_message(scene: S
     scene.release()
 
 
-def test_display_text_escapes_what_a_terminal_acts_on_and_keeps_the_rest() -> None:
-    assert holder.display_text("ros2 launch pkg a.py ü 😀") == "ros2 launch pkg a.py ü 😀"
-    assert holder.display_text("a\tb\x7f\x9b\u2028\u202e") == "a\\x09b\\x7f\\x9b\\u2028\\u202e"
-    assert holder.display_text("caf\udce9") == "caf\\xe9"  # an undecodable byte
-    cut = holder.display_text("x" * 5000, 100)
-    assert cut.startswith("x" * 100) and cut.endswith("(4900 more characters)")
-
-
 def test_user_name_is_the_passwd_name_or_the_number_or_unknown() -> None:
     """One lookup for records, tickets, squatters and survivors, never an exception."""
     assert holder.user_name(os.getuid()) == pwd.getpwuid(os.getuid()).pw_name

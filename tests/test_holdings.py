@@ -27,7 +27,7 @@ from ros_isolated_test.domain_coordinator.holdings import (
     Hold,
     Picture,
 )
-from ros_isolated_test.domain_coordinator.queue import Queue
+from ros_isolated_test.domain_coordinator.queue import Queue, RunnerRecord, Waiter
 from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
     PoolExhaustedError,
@@ -44,6 +44,17 @@ def _holding(resources: dict[str, int]) -> Hold:
 
 def _board(held: list[dict[str, int]], waiting: list[Demand]) -> Picture:
     return Picture([_holding(item) for item in held], waiting, dict(CAPACITY))
+
+
+def test_a_hold_and_a_waiter_show_the_fields_of_every_runner_alike() -> None:
+    """``status --json``: one set of runner fields, a waiter's place before, a hold's ID after."""
+    runner = RunnerRecord(12, "alice", "ros2 test", 5.0, "h", {"gpu": 1}).as_dict()
+    waiter = Waiter(3, 12, "alice", "ros2 test", 5.0, "h", {"gpu": 1}).as_dict()
+    hold = Hold(12, "alice", "ros2 test", 5.0, "h", {"gpu": 1}, {"gpu": 2}, 7, (99,)).as_dict()
+    assert list(runner) == ["pid", "user", "command", "started", "host", "resources"]
+    assert list(waiter.items()) == [("position", 3), *runner.items()]
+    assert list(hold.items()) == [*runner.items(), ("domain_id", 7), ("survivors", [99])]
+    assert "survivors" not in _holding({"gpu": 1}).as_dict()  # only a kept hold has them
 
 
 def test_an_earlier_large_request_is_set_aside_before_later_small_ones() -> None:

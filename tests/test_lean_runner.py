@@ -25,7 +25,7 @@ from helpers.commands import ament, run_cli, run_runner
 from helpers.domains import free_ids
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
-from ros_isolated_test.domain_coordinator.reservation import lock_path
+from ros_isolated_test.domain_coordinator.lock_files import lock_path
 from ros_isolated_test.process import supervisor
 from ros_isolated_test.process.capture import OutputCapture
 

@@ -37,11 +37,8 @@ from ros_isolated_test.domain_coordinator import (
     held_domains,
 )
 from ros_isolated_test.domain_coordinator.holder import record_path
-from ros_isolated_test.domain_coordinator.reservation import (
-    lock_path,
-    own_lock_path,
-    release_stamp,
-)
+from ros_isolated_test.domain_coordinator.lock_files import lock_path, own_lock_path
+from ros_isolated_test.domain_coordinator.reservation import release_stamp
 
 NOBODY, DAEMON = 65534, 1
 #: A run that takes longer than this is hanging (on a FIFO, a lock, a mount).

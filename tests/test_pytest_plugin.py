@@ -227,6 +227,13 @@ def header_lines(output: str) -> list[str]:
         (True, ("--no-ros-isolation",), False),
         (True, ("-o", "ros_isolation=false"), False),
         (True, OFF, False),
+        # The ini option's other words, read as every on/off switch reads them; auto and
+        # blank leave it to the package.
+        (False, ("-o", "ros_isolation= Yes "), True),
+        (True, ("-o", "ros_isolation=0"), False),
+        (True, ("-o", "ros_isolation=AUTO"), True),
+        (True, ("-o", "ros_isolation="), True),
+        (False, ("-o", "ros_isolation=auto"), False),
     ],
 )
 def test_activation(
@@ -250,6 +257,16 @@ def test_activation(
     else:
         assert seen == {"ROS_DOMAIN_ID": None, "ROS_AUTOMATIC_DISCOVERY_RANGE": None}
         assert header_lines(done.stdout) == []
+
+
+def test_an_ini_word_neither_on_nor_off_is_a_usage_error(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    root = project(tmp_path / "pkg")
+    done = run_pytest(root, plain_env, "-o", "ros_isolation=maybe", "test")
+    assert done.returncode == 4, done.stdout + done.stderr  # pytest's usage error
+    assert "ini option ros_isolation='maybe': use auto, true or false" in done.stderr, done.stderr
+    assert not (tmp_path / "record.json").exists()  # nothing ran
 
 
 def test_a_bad_rerun_variable_does_not_concern_the_plugin(

@@ -25,6 +25,7 @@ from helpers import peak_rss
 from helpers.commands import BIN, REPO
 from lxml import etree
 
+from ros_isolated_test.text import shown_code
 from ros_isolated_test.xunit import reader, validate, xml_text
 from ros_isolated_test.xunit.result_file import normalise_file
 
@@ -379,7 +380,7 @@ def test_every_character_reference_is_shown_exactly_when_xml_forbids_it() -> Non
         out = sanitiser.feed(f"<r>{body}</r>".encode(), final=True).decode()
         shown = out[len("<r>") : -len("</r>")].split("|")
         expected = [
-            ref if xml_text.legal(code) and code != 0xFFFD else xml_text.shown_code(code)
+            ref if xml_text.legal(code) and code != 0xFFFD else shown_code(code)
             for ref, code in refs
         ]
         assert shown == expected

@@ -30,8 +30,6 @@ from lxml import etree
 
 from ros_isolated_test.domain_coordinator import DomainCoordinator
 from ros_isolated_test.domain_coordinator.queue import Queue
-from ros_isolated_test.runner import settings
-from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.settings import MAX_RERUNS
 from ros_isolated_test.schemas import junit_schema
 from ros_isolated_test.xunit.attempts import merge_attempts
@@ -539,8 +537,7 @@ def test_a_rerun_result_is_never_on_disk_without_the_earlier_attempts(tmp_path: 
     1's failure is on disk beside it, while its own word (passed) still sets the exit code.
     """
     path = tmp_path / "pkg" / "t.xml"
-    request = RunRequest(("t",), Mode.AMENT, settings.defaults(), result_file=path)
-    result = ResultFile(request)
+    result = ResultFile(path, ("t",), "pkg", "t")
     result.prepare()
     assert result.write_placeholder()
     result.write([result.case(Outcome.FAILURE, "attempt one failed")])
@@ -607,7 +604,6 @@ def test_an_attempts_file_that_cannot_be_kept_is_one_line_naming_the_fix(
 ) -> None:
     """Something in the way of ``.attempt1.orig`` (a folder the test made): say what to do."""
     path = tmp_path / "t.xml"
-    request = RunRequest(("t",), Mode.AMENT, settings.defaults(), result_file=path)
 
     def attempt_one(result: ResultFile) -> None:
         result.prepare()
@@ -619,13 +615,13 @@ def test_an_attempts_file_that_cannot_be_kept_is_one_line_naming_the_fix(
         result.write(result.adopt(), checked=True)
 
     # The control: nothing in the way, attempt 1's own file is kept, nothing said.
-    kept = ResultFile(request)
+    kept = ResultFile(path, ("t",), "pkg", "t")
     attempt_one(kept)
     capsys.readouterr()
     assert kept.next_attempt(1, {}, lambda latest: latest)
     assert b"own failure" in path.with_name("t.xml.attempt1.orig").read_bytes()
     assert capsys.readouterr().err == ""
-    blocked = ResultFile(request)
+    blocked = ResultFile(path, ("t",), "pkg", "t")
     attempt_one(blocked)
     (path.with_name("t.xml.attempt1.orig") / "made by the test").mkdir(parents=True)
     capsys.readouterr()

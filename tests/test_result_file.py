@@ -162,16 +162,13 @@ _LIMITED = textwrap.dedent(
     """
     import resource, signal, sys
     from pathlib import Path
-    from ros_isolated_test.runner import settings
-    from ros_isolated_test.runner.request import Mode, RunRequest
     from ros_isolated_test.xunit.model import Outcome
-    from ros_isolated_test.xunit.result_file import ResultFile
+    from ros_isolated_test.xunit.result_file import ResultFile, test_name_of
 
     path, long = Path(sys.argv[1]), int(sys.argv[2])
     name = "n" * long
     command = ("x" * long, "&<>" * long)
-    request = RunRequest(command, Mode.AMENT, settings.defaults(), result_file=path)
-    result = ResultFile(request)
+    result = ResultFile(path, command, path.parent.name, test_name_of(path))
     result.prepare()
     result.write_placeholder()
     assert result.placeholder is not None and result.write_error is None

@@ -19,14 +19,16 @@ function(_ros_isolated_test_runner var)
   set(${var} "${_runner}" PARENT_SCOPE)
 endfunction()
 
-# The call's arguments in ${var}, RERUNS <n> and RESOURCES <spec> turned into
+# What every ros_isolated_add_* macro passes to the macro it wraps after the arguments
+# that one takes by position, in ${var}: RUNNER <our RUNNER>, the call's other arguments,
+# and its RERUNS <n> and RESOURCES <spec> turned into
 # ENV ROS_ISOLATED_TEST_RERUNS=<n> ROS_ISOLATED_TEST_RESOURCES=<spec>.
 # Last: ament_add_test passes ENV on as --env, where the last value of a variable wins.
 function(_ros_isolated_test_arguments var)
+  _ros_isolated_test_runner(_runner)
   _ros_isolated_test_parse(_arguments _reruns _resources _missing ${ARGN})
   _ros_isolated_test_env(_env "${_missing}" "${_reruns}" "${_resources}")
-  list(APPEND _arguments ${_env})
-  set(${var} "${_arguments}" PARENT_SCOPE)
+  set(${var} RUNNER "${_runner}" ${_arguments} ${_env} PARENT_SCOPE)
 endfunction()
 
 # RERUNS <n> and RESOURCES <spec> taken out of ARGN: their values in ${reruns_var} and
@@ -121,59 +123,65 @@ endfunction()
 # next call neither finds the package again nor loads its files a second time. Their own
 # variables carry the _ros_isolated_test prefix, as they land in the caller's scope too.
 
+# The one wrapper behind every ros_isolated_add_* macro: finds <package> unless <command>
+# is known already, then calls <command> with <first> (and for ament_add_pytest_test the
+# path after it), our RUNNER, and the call's other arguments, which the macro left in
+# _ros_isolated_test_argn: a macro handing its ARGN to another macro would have CMake
+# read the escapes in it twice. CMake 3.15 cannot call a command named by a variable
+# (cmake_language(CALL) is 3.18), hence the one call per command below.
+macro(_ros_isolated_test_add _ros_isolated_test_command _ros_isolated_test_package
+    _ros_isolated_test_first)
+  if(NOT COMMAND ${_ros_isolated_test_command})
+    find_package(${_ros_isolated_test_package} REQUIRED)
+  endif()
+  _ros_isolated_test_arguments(_ros_isolated_test_arguments ${_ros_isolated_test_argn})
+  set(_ros_isolated_test_kind ${_ros_isolated_test_command})
+  if(_ros_isolated_test_kind MATCHES "^ament_add_gtest$")
+    ament_add_gtest("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
+  elseif(_ros_isolated_test_kind MATCHES "^ament_add_gmock$")
+    ament_add_gmock("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
+  elseif(_ros_isolated_test_kind MATCHES "^ament_add_pytest_test$")
+    ament_add_pytest_test("${_ros_isolated_test_first}" "${ARGN}"
+      ${_ros_isolated_test_arguments})
+  elseif(_ros_isolated_test_kind MATCHES "^add_launch_test$")
+    # add_launch_test passes arguments it does not know (RUNNER) on to ament_add_test.
+    add_launch_test("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
+  else()
+    ament_add_test("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
+  endif()
+endmacro()
+
 # ros_isolated_add_test(testname COMMAND ... [RERUNS n] [RESOURCES spec]
 #                       [any ament_add_test argument])
 macro(ros_isolated_add_test _ros_isolated_test_name)
-  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
-  _ros_isolated_test_arguments(_ros_isolated_test_arguments ${ARGN})
-  ament_add_test("${_ros_isolated_test_name}" RUNNER "${_ros_isolated_test_runner_path}"
-    ${_ros_isolated_test_arguments})
+  set(_ros_isolated_test_argn ${ARGN})
+  _ros_isolated_test_add(ament_add_test ament_cmake_test "${_ros_isolated_test_name}")
 endmacro()
 
 # ros_isolated_add_gtest(target source... [RERUNS n] [RESOURCES spec]
 #                        [any ament_add_gtest argument])
 macro(ros_isolated_add_gtest _ros_isolated_test_target)
-  if(NOT COMMAND ament_add_gtest)
-    find_package(ament_cmake_gtest REQUIRED)
-  endif()
-  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
-  _ros_isolated_test_arguments(_ros_isolated_test_arguments ${ARGN})
-  ament_add_gtest("${_ros_isolated_test_target}" RUNNER "${_ros_isolated_test_runner_path}"
-    ${_ros_isolated_test_arguments})
+  set(_ros_isolated_test_argn ${ARGN})
+  _ros_isolated_test_add(ament_add_gtest ament_cmake_gtest "${_ros_isolated_test_target}")
 endmacro()
 
 # ros_isolated_add_gmock(target source... [RERUNS n] [RESOURCES spec]
 #                        [any ament_add_gmock argument])
 macro(ros_isolated_add_gmock _ros_isolated_test_target)
-  if(NOT COMMAND ament_add_gmock)
-    find_package(ament_cmake_gmock REQUIRED)
-  endif()
-  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
-  _ros_isolated_test_arguments(_ros_isolated_test_arguments ${ARGN})
-  ament_add_gmock("${_ros_isolated_test_target}" RUNNER "${_ros_isolated_test_runner_path}"
-    ${_ros_isolated_test_arguments})
+  set(_ros_isolated_test_argn ${ARGN})
+  _ros_isolated_test_add(ament_add_gmock ament_cmake_gmock "${_ros_isolated_test_target}")
 endmacro()
 
 # ros_isolated_add_pytest_test(testname path [RERUNS n] [RESOURCES spec]
 #                              [any ament_add_pytest_test argument])
 macro(ros_isolated_add_pytest_test _ros_isolated_test_name _ros_isolated_test_path)
-  if(NOT COMMAND ament_add_pytest_test)
-    find_package(ament_cmake_pytest REQUIRED)
-  endif()
-  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
-  _ros_isolated_test_arguments(_ros_isolated_test_arguments ${ARGN})
-  ament_add_pytest_test("${_ros_isolated_test_name}" "${_ros_isolated_test_path}"
-    RUNNER "${_ros_isolated_test_runner_path}" ${_ros_isolated_test_arguments})
+  set(_ros_isolated_test_argn ${ARGN})
+  _ros_isolated_test_add(ament_add_pytest_test ament_cmake_pytest
+    "${_ros_isolated_test_name}" "${_ros_isolated_test_path}")
 endmacro()
 
 # ros_isolated_add_launch_test(file [RERUNS n] [RESOURCES spec] [any add_launch_test argument])
 macro(ros_isolated_add_launch_test _ros_isolated_test_file)
-  if(NOT COMMAND add_launch_test)
-    find_package(launch_testing_ament_cmake REQUIRED)
-  endif()
-  _ros_isolated_test_runner(_ros_isolated_test_runner_path)
-  _ros_isolated_test_arguments(_ros_isolated_test_arguments ${ARGN})
-  # add_launch_test passes arguments it does not know (RUNNER) on to ament_add_test.
-  add_launch_test("${_ros_isolated_test_file}"
-    RUNNER "${_ros_isolated_test_runner_path}" ${_ros_isolated_test_arguments})
+  set(_ros_isolated_test_argn ${ARGN})
+  _ros_isolated_test_add(add_launch_test launch_testing_ament_cmake "${_ros_isolated_test_file}")
 endmacro()

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
 from ros_isolated_test.process import proc
-from ros_isolated_test.text import shown
+from ros_isolated_test.text import DISPLAY_LIMIT, display_text
 
 #: JSON string escapes: quote, backslash and every control character.
 _JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
@@ -27,7 +27,7 @@ _JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
 #: Latest time a record may carry: the end of year 9999, which every strftime can show.
 LATEST_TIME = 253402300799.0
 #: Longest text shown for a record's command (user and host: :data:`SHORT_TEXT`).
-LONG_TEXT = 2000
+LONG_TEXT = DISPLAY_LIMIT
 SHORT_TEXT = 256
 
 
@@ -95,28 +95,6 @@ def iso_time(when: float) -> str:
         return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(when))
     except (OverflowError, OSError, ValueError):
         return "-"
-
-
-def display_text(text: str, limit: int = LONG_TEXT) -> str:
-    r"""``text`` safe to print on one line: every non-printable character as an escape.
-
-    A control character (``\r``, ``\n``, ``\x1b``...) from a planted record could forge
-    a line of ``status`` or drive a terminal; it is shown as ``\xNN`` (``\uNNNN``
-    beyond), a byte that was not UTF-8 (a lone surrogate) as :func:`shown` shows it.
-    Longer texts keep their first ``limit`` characters and say how many were cut.
-    """
-    if len(text) > limit:
-        text = f"{text[:limit]}... ({len(text) - limit} more characters)"
-    if text.isprintable():
-        return text
-    return "".join(char if char.isprintable() else _escape(char) for char in shown(text))
-
-
-def _escape(char: str) -> str:
-    code = ord(char)
-    if code <= 0xFF:
-        return f"\\x{code:02x}"
-    return f"\\u{code:04x}" if code <= 0xFFFF else f"\\U{code:08x}"
 
 
 def record_pid(value: object, limit: int) -> int | None:

@@ -25,16 +25,21 @@ from __future__ import annotations
 
 import contextlib
 import os
-import stat
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
 from ros_isolated_test.domain_coordinator import holder
 from ros_isolated_test.domain_coordinator.flock import try_lock
+from ros_isolated_test.domain_coordinator.lock_dir import (
+    LockDirError,
+    UnusableLockFile,
+    open_lock_file,
+)
 from ros_isolated_test.domain_coordinator.queue import (
     RESOURCE_MARK,
     Queue,
+    RunnerRecord,
     Ticket,
     record_amounts,
 )
@@ -67,20 +72,10 @@ class CapacityConflictError(RuntimeError):
     """Runners disagree on a capacity: the message names both and the fix."""
 
 
-class Hold:
+class Hold(RunnerRecord):
     """What one live runner holds, as its hold record says."""
 
-    __slots__ = (
-        "capacity",
-        "command",
-        "domain_id",
-        "host",
-        "pid",
-        "resources",
-        "since",
-        "survivors",
-        "user",
-    )
+    __slots__ = ("capacity", "domain_id", "survivors")
 
     def __init__(
         self,
@@ -94,12 +89,7 @@ class Hold:
         domain_id: int | None,
         survivors: tuple[int, ...] = (),
     ) -> None:
-        self.pid = pid
-        self.user = user
-        self.command = command
-        self.since = since
-        self.host = host
-        self.resources = resources
+        super().__init__(pid, user, command, since, host, resources)
         #: The capacity its runner was given for what it holds: all runners must agree.
         self.capacity = capacity
         self.domain_id = domain_id
@@ -108,15 +98,7 @@ class Hold:
 
     def as_dict(self) -> dict[str, object]:
         """The fields ``status --json`` shows (``survivors`` only for a kept hold)."""
-        fields: dict[str, object] = {
-            "pid": self.pid,
-            "user": self.user,
-            "command": self.command,
-            "started": self.since,
-            "host": self.host,
-            "resources": dict(self.resources),
-            "domain_id": self.domain_id,
-        }
+        fields = {**super().as_dict(), "domain_id": self.domain_id}
         if self.survivors:
             fields["survivors"] = list(self.survivors)
         return fields
@@ -386,34 +368,6 @@ def picture(
     return Picture(held, waiting, {**known, **capacity})
 
 
-def _open_mutex(path: Path) -> int | None:
-    """A descriptor of a mutex file (created shared if missing); None if something is planted."""
-    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
-    try:
-        # Created exclusively, else opened without O_CREAT: in a sticky directory,
-        # fs.protected_regular refuses O_CREAT on another user's existing file.
-        fd = os.open(path, flags | os.O_CREAT | os.O_EXCL, 0o666)
-    except FileExistsError:
-        try:
-            fd = os.open(path, flags)
-        except OSError:
-            return None
-    except OSError:
-        return None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            os.close(fd)
-            return None
-        if info.st_uid == os.getuid():
-            with contextlib.suppress(OSError):
-                os.fchmod(fd, 0o666)  # every user must open it
-    except OSError:
-        os.close(fd)
-        return None
-    return fd
-
-
 @contextlib.contextmanager
 def mutex(lock_dir: Path) -> Iterator[bool]:
     """Try for the machine-wide lock for deciding and taking resources (a few milliseconds).
@@ -424,9 +378,13 @@ def mutex(lock_dir: Path) -> Iterator[bool]:
     user's own one stands in: runners of this user still exclude each other, and the
     claims still bind everyone.
     """
-    fd = _open_mutex(lock_dir / MUTEX)
-    if fd is None:
-        fd = _open_mutex(lock_dir / f"resources.uid{os.getuid()}.lock")
+    fd: int | None = None
+    for path in (lock_dir / MUTEX, lock_dir / f"resources.uid{os.getuid()}.lock"):
+        try:
+            fd = open_lock_file(path)
+            break
+        except (UnusableLockFile, LockDirError):
+            continue
     if fd is None:
         yield True  # nothing to lock with: the claims alone keep the order
         return

@@ -13,10 +13,19 @@ LOCK_DIR_ENV = "ROS_ISOLATED_TEST_LOCK_DIR"
 DEFAULT_DIR_NAME = "ros-isolated-test-domains"
 #: Like /tmp: everyone may create lock files, nobody may delete another user's.
 SHARED_DIR_MODE = 0o1777
+#: Lock files are shared by all users: each must be able to open and flock them.
+LOCK_FILE_MODE = 0o666
+#: Errors creating a file that say the directory cannot take files at all: not one
+#: file's problem, so no other file name would help.
+_DIRECTORY_ERRORS = frozenset({errno.ENOSPC, errno.EROFS, errno.EDQUOT, errno.EACCES})
 
 
 class LockDirError(RuntimeError):
     """The lock directory cannot be used; the message names the path and the fix."""
+
+
+class UnusableLockFile(Exception):
+    """Something other than a lock file we can open is at the path (planted by someone)."""
 
 
 def lock_dir_from_env(environ: Mapping[str, str] | None = None) -> Path:
@@ -99,3 +108,43 @@ def ensure_lock_dir(path: Path) -> Path:
             f"make it mode 1777 (chmod 1777 {path}) or point {LOCK_DIR_ENV} elsewhere"
         )
     return path
+
+
+def open_lock_file(path: Path) -> int:
+    """A read-only descriptor of a lock file, created openable by every user if missing.
+
+    The one opener of the ID's lock files and of the resources' mutex. Read-only is
+    enough for flock, so a lock file another user created can be used whatever its mode
+    lets us write; one that exists is never changed, ours included. Never follows a
+    symlink, never blocks on a FIFO. Raises :class:`UnusableLockFile` for anything
+    planted at the path, :class:`LockDirError` when the directory can take no file.
+    """
+    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
+    try:
+        # Created exclusively, else opened without O_CREAT: in a sticky directory,
+        # fs.protected_regular refuses O_CREAT on another user's existing file.
+        fd = os.open(path, flags | os.O_CREAT | os.O_EXCL, LOCK_FILE_MODE)
+    except FileExistsError:
+        try:
+            fd = os.open(path, flags)
+        except OSError as error:
+            raise UnusableLockFile(f"{path}: {error.strerror}") from None
+    except OSError as error:
+        if error.errno in _DIRECTORY_ERRORS:
+            raise LockDirError(
+                f"cannot create lock file {path}: {error.strerror}; free space or grant "
+                f"write access to {path.parent}, or point {LOCK_DIR_ENV} elsewhere"
+            ) from None
+        raise UnusableLockFile(f"{path}: {error.strerror}") from None
+    else:
+        # The umask cut the mode; every user must be able to open the file.
+        with contextlib.suppress(OSError):
+            os.fchmod(fd, LOCK_FILE_MODE)
+    try:
+        regular = stat.S_ISREG(os.fstat(fd).st_mode)
+    except OSError:
+        regular = False
+    if not regular:
+        os.close(fd)
+        raise UnusableLockFile(f"{path} is not a regular file")
+    return fd

@@ -34,7 +34,6 @@ from ros_isolated_test.domain_coordinator.holder import (
     LATEST_TIME,
     LONG_TEXT,
     SHORT_TEXT,
-    display_text,
     iso_time,
     json_string,
     owned_file,
@@ -47,6 +46,7 @@ from ros_isolated_test.domain_coordinator.holder import (
 )
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError, ensure_lock_dir
 from ros_isolated_test.process import proc
+from ros_isolated_test.text import display_text
 
 QUEUE_DIR = "queue"
 _TICKET = ".ticket"
@@ -76,10 +76,38 @@ class Ticket:
         os.close(self.fd)
 
 
-class Waiter:
+class RunnerRecord:
+    """A runner as its ticket's record shows it: a waiter in the queue, or a hold."""
+
+    __slots__ = ("command", "host", "pid", "resources", "since", "user")
+
+    def __init__(
+        self, pid: int, user: str, command: str, since: float, host: str, resources: dict[str, int]
+    ) -> None:
+        self.pid = pid
+        self.user = user
+        self.command = command
+        self.since = since
+        self.host = host
+        #: What it asks for besides an ID, or holds ({name: amount}; empty: nothing).
+        self.resources = resources
+
+    def as_dict(self) -> dict[str, object]:
+        """The fields ``status --json`` shows of every runner, waiting or holding."""
+        return {
+            "pid": self.pid,
+            "user": self.user,
+            "command": self.command,
+            "started": self.since,
+            "host": self.host,
+            "resources": dict(self.resources),
+        }
+
+
+class Waiter(RunnerRecord):
     """A runner waiting for an ID, as its ticket describes it."""
 
-    __slots__ = ("command", "host", "pid", "position", "resources", "since", "user")
+    __slots__ = ("position",)
 
     def __init__(
         self,
@@ -91,15 +119,9 @@ class Waiter:
         host: str,
         resources: dict[str, int] | None = None,
     ) -> None:
+        super().__init__(pid, user, command, since, host, resources or {})
         #: 1 for the head of the queue, the next to get an ID.
         self.position = position
-        self.pid = pid
-        self.user = user
-        self.command = command
-        self.since = since
-        self.host = host
-        #: What it asks for besides an ID ({name: amount}; empty: nothing).
-        self.resources = resources or {}
 
     @property
     def since_iso(self) -> str:
@@ -107,16 +129,8 @@ class Waiter:
         return iso_time(self.since)
 
     def as_dict(self) -> dict[str, object]:
-        """The fields ``status --json`` shows."""
-        return {
-            "position": self.position,
-            "pid": self.pid,
-            "user": self.user,
-            "command": self.command,
-            "started": self.since,
-            "host": self.host,
-            "resources": dict(self.resources),
-        }
+        """The fields ``status --json`` shows, its place in the queue first."""
+        return {"position": self.position, **super().as_dict()}
 
 
 def _record(command: Sequence[str] | None, extra: str = "") -> bytes:

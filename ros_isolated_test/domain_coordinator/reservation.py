@@ -21,7 +21,6 @@ ID, all or nothing, and gives both back together.
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 import stat
 import time
@@ -34,21 +33,20 @@ from ros_isolated_test.domain_coordinator.escaped import escaped_processes
 from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
 from ros_isolated_test.domain_coordinator.lock_dir import (
     LockDirError,
+    UnusableLockFile,
     ensure_lock_dir,
     lock_dir_from_env,
+    open_lock_file,
 )
+from ros_isolated_test.domain_coordinator.lock_files import lock_path, own_lock_path
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
 from ros_isolated_test.domain_coordinator.queue import RESOURCE_MARK, Queue, Ticket
 from ros_isolated_test.domain_coordinator.resources import describe
 from ros_isolated_test.process import proc
 
-#: Lock files are shared by all users: each must be able to open and flock them.
-LOCK_FILE_MODE = 0o666
 #: How often a waiting runner first in line tries for an ID, and how often the others look.
 HEAD_POLL_SECONDS = 0.05
 QUEUE_POLL_SECONDS = 0.1
-#: Errors that say the directory cannot take files at all: not an ID's problem.
-_DIRECTORY_ERRORS = frozenset({errno.ENOSPC, errno.EROFS, errno.EDQUOT})
 
 
 class PoolExhaustedError(RuntimeError):
@@ -57,20 +55,6 @@ class PoolExhaustedError(RuntimeError):
 
 class ResourcesBusyError(PoolExhaustedError):
     """The resources asked for did not come free in time (exit code as for no ID)."""
-
-
-class _Unusable(Exception):
-    """Something other than our lock file is at the path (planted by someone)."""
-
-
-def lock_path(lock_dir: Path, domain_id: int) -> Path:
-    """The file whose flock is the reservation of ``domain_id``."""
-    return lock_dir / f"domain-{domain_id}.lock"
-
-
-def own_lock_path(lock_dir: Path, domain_id: int) -> Path:
-    """The lock file of the current user for the ID, used when the shared one was planted."""
-    return lock_dir / f"domain-{domain_id}.uid{os.getuid()}.lock"
 
 
 def release_stamp(lock_dir: Path, domain_id: int) -> Path:
@@ -205,38 +189,6 @@ class ResourceHold:
             self.holding.close()
 
 
-def _open_lock_file(path: Path) -> int:
-    """A read-only descriptor of a lock file, created shared if missing.
-
-    Read-only is enough for flock, so a lock file another user created can be used
-    whatever its mode lets us write. Never follows a symlink. Raises :class:`_Unusable`
-    for anything planted at the path, :class:`LockDirError` when no file can be made.
-    """
-    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK
-    try:
-        fd = os.open(path, flags | os.O_CREAT | os.O_EXCL, LOCK_FILE_MODE)
-    except FileExistsError:
-        try:
-            fd = os.open(path, flags)
-        except OSError as error:
-            raise _Unusable(f"{path}: {error.strerror}") from None
-    except OSError as error:
-        if error.errno in _DIRECTORY_ERRORS or error.errno == errno.EACCES:
-            raise LockDirError(
-                f"cannot create lock file {path}: {error.strerror}; free space or grant "
-                f"write access to {path.parent}, or point ROS_ISOLATED_TEST_LOCK_DIR elsewhere"
-            ) from None
-        raise _Unusable(f"{path}: {error.strerror}") from None
-    else:
-        # The umask cut the mode; every user must be able to open the file.
-        with contextlib.suppress(OSError):
-            os.fchmod(fd, LOCK_FILE_MODE)
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        raise _Unusable(f"{path} is not a regular file")
-    return fd
-
-
 def _flock(fd: int) -> int | None:
     try:
         if _try_flock(fd):
@@ -261,38 +213,10 @@ def try_lock(lock_dir: Path, domain_id: int) -> int | None:
     """
     for path in (lock_path(lock_dir, domain_id), own_lock_path(lock_dir, domain_id)):
         try:
-            return _flock(_open_lock_file(path))
-        except _Unusable:
+            return _flock(open_lock_file(path))
+        except UnusableLockFile:
             continue
     return PORT_ONLY
-
-
-def _lock_files(lock_dir: Path, domain_id: int) -> list[Path]:
-    """The shared lock file of the ID and every user's own one."""
-    paths = [lock_path(lock_dir, domain_id)]
-    with contextlib.suppress(OSError):
-        prefix = f"domain-{domain_id}.uid"
-        for entry in os.scandir(lock_dir):
-            if entry.name.startswith(prefix) and entry.name.endswith(".lock"):
-                paths.append(Path(entry.path))
-    return paths
-
-
-def probe_lock(lock_dir: Path, domain_id: int) -> bool:
-    """Whether any lock file of the ID (shared, or a user's own) is held right now."""
-    for path in _lock_files(lock_dir, domain_id):
-        try:
-            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
-        except OSError:
-            continue
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            os.close(fd)
-            continue
-        locked = _flock(fd)
-        if locked is None:
-            return True
-        os.close(locked)
-    return False
 
 
 def _released_at(lock_dir: Path) -> dict[int, float]:

@@ -23,8 +23,9 @@ from pathlib import Path
 
 from ros_isolated_test.domain_coordinator import holder, participants, port_guard, squatters
 from ros_isolated_test.domain_coordinator.block import blocking_survivors
-from ros_isolated_test.domain_coordinator.reservation import probe_lock
+from ros_isolated_test.domain_coordinator.lock_files import probe_lock
 from ros_isolated_test.process import proc
+from ros_isolated_test.text import display_text
 
 _LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
 
@@ -87,7 +88,7 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                         domain_id=domain_id,
                         pid=squatter.pid,
                         user=squatter.user,
-                        command=holder.display_text(squatter.command),
+                        command=display_text(squatter.command),
                         started=squatter.started,
                         host="",
                     ),
@@ -109,7 +110,7 @@ def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
         domain_id=domain_id,
         pid=survivor.pid,
         user=holder.user_name(proc.owner_uid(survivor.pid)),
-        command=holder.display_text(proc.cmdline(survivor.pid) or f"({survivor.name})"),
+        command=display_text(proc.cmdline(survivor.pid) or f"({survivor.name})"),
         started=proc.started_at(survivor),
         host="",
     )

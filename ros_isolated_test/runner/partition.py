@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import os
 
+from ros_isolated_test.switches import NotOnOff, on_off
+from ros_isolated_test.text import bounded
+
 #: Read by gz-transport 12 and later (Garden, Harmonic: Jazzy's, Ionic, Jetty).
 GZ_VAR = "GZ_PARTITION"
 #: Read by ignition-transport 11 and earlier (Fortress: Humble's, Citadel).
@@ -26,8 +29,6 @@ OPT_OUT_ENV = "ROS_ISOLATED_TEST_GZ_PARTITION"
 #: The suite property naming the partition.
 PROPERTY = "gz_partition"
 
-_ON_WORDS = frozenset({"", "1", "on", "true", "yes"})
-_OFF_WORDS = frozenset({"0", "off", "false", "no"})
 #: What every Gazebo release accepts in a partition (``/`` and ``@`` are not safe).
 _SAFE = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
 #: Longest host part kept: the whole name stays short enough to show in a table.
@@ -44,24 +45,20 @@ def enabled(value: str | None, origin: str = OPT_OUT_ENV) -> bool:
     Anything but a plain on or off word is refused: a typo must not silently drop the
     isolation nor keep it against the user's wish.
     """
-    word = "" if value is None else value.strip().lower()
-    if word in _ON_WORDS:
-        return True
-    if word in _OFF_WORDS:
-        return False
-    raise PartitionSettingError(
-        f"{origin}={value!r} is neither on nor off; set {OPT_OUT_ENV}=off to set no Gazebo "
-        "partition, or unset it"
-    )
+    try:
+        return on_off(value, unset=True)
+    except NotOnOff:
+        raise PartitionSettingError(
+            f"{origin}={value!r} is neither on nor off; set {OPT_OUT_ENV}=off to set no "
+            "Gazebo partition, or unset it"
+        ) from None
 
 
 def _host_part(host: str) -> str:
     """``host`` in safe characters, bounded; its head and tail kept, where hosts differ."""
     safe = "".join(char if char in _SAFE else "-" for char in host) or "host"
-    if len(safe) > HOST_CHARS:
-        head = HOST_CHARS // 2
-        safe = f"{safe[:head]}-{safe[len(safe) - (HOST_CHARS - head - 1) :]}"
-    return safe
+    head = HOST_CHARS // 2
+    return bounded(safe, HOST_CHARS, head=head, tail=HOST_CHARS - head - 1, mark="-")
 
 
 def name(host: str, domain_id: int, pid: int) -> str:

@@ -11,6 +11,7 @@ from enum import Enum
 from pathlib import Path
 
 from ros_isolated_test.process.supervisor import KILL_GRACE
+from ros_isolated_test.xunit.result_file import test_name_of
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -20,7 +21,6 @@ __all__ = [
     "EnvAssignment",
     "Mode",
     "RunRequest",
-    "test_name_of",
 ]
 
 
@@ -31,15 +31,6 @@ class Mode(Enum):
     SHELL = "shell"
     #: ctest RUNNER (run_test.py's contract): a command that cannot start counts as code 1.
     AMENT = "ament"
-
-
-def test_name_of(result_file: Path) -> str:
-    """The test a result file belongs to: its name without the producer's suffix."""
-    name = result_file.name
-    for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
-        if name.endswith(suffix) and len(name) > len(suffix):
-            return name[: -len(suffix)]
-    return name
 
 
 class EnvAssignment:

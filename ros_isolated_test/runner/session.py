@@ -22,6 +22,7 @@ from pathlib import Path
 from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
 from ros_isolated_test.domain_coordinator.holdings import CapacityConflictError
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
+from ros_isolated_test.domain_coordinator.pool import id_ranges
 from ros_isolated_test.domain_coordinator.reservation import (
     DomainCoordinator,
     PoolExhaustedError,
@@ -46,11 +47,16 @@ if TYPE_CHECKING:
     from ros_isolated_test.xunit.model import Suite
 
 
+def _result_file(request: RunRequest) -> ResultFile:
+    """The request's result file, its suite named as ament names the test."""
+    return ResultFile(request.result_file, request.command, request.package, request.test_name)
+
+
 def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     """Reserve, run, write results; return the exit code the caller should exit with."""
     _keep_standard_descriptors()
     console = console if console is not None else _console()
-    result = ResultFile(request)
+    result = _result_file(request)
     try:
         result.prepare()
     except OSError as error:
@@ -301,7 +307,7 @@ def _attempt(
             raise policy.refusal(outcome.start_error)
         # When it ran, what it waited for first and on which pool: the report's timeline.
         waits = (0.0, 0.0) if held is None else (held.waited, held.waited_resources)
-        pool = config.pool if domain_id is not None else ()
+        pool = id_ranges(config.pool) if domain_id is not None else ""
         result.properties.update(timeline_properties(started, time.time(), *waits, pool))
         if held is not None:
             held.survivors = outcome.survivors  # what blocks the ID: as named below
@@ -832,7 +838,7 @@ def _conclude(
         shell=request.mode is Mode.SHELL,
     )
     if written == exit_codes.WRITE_OWN:
-        return _adopt(result, capture, outcome, code, reason, skip)
+        return _adopt(request, result, capture, outcome, code, reason, skip)
     # The tail only where it is shown: decoding it costs a passing test (locale, 64 KiB).
     if written == exit_codes.WRITE_PASSED:
         cases = [result.case(Outcome.PASSED, duration=duration)]
@@ -852,7 +858,7 @@ def _conclude(
     output = ""
     code = exit_codes.code_for(written, code)
     if exit_codes.output_lost(code, capture.file_error):
-        cases.append(_output_lost_case(result, capture))
+        cases.append(_output_lost_case(result, capture, request.output_file))
         output = capture.tail_text()
         code = exit_codes.FAILED  # a pass whose output file lost output fails
     result.write(cases, duration, output)
@@ -860,6 +866,7 @@ def _conclude(
 
 
 def _adopt(
+    request: RunRequest,
     result: ResultFile,
     capture: OutputCapture,
     outcome: supervisor.Outcome,
@@ -878,7 +885,7 @@ def _adopt(
         cases.append(normalise.exit_case(result.suite_name, reason, all_passed=not any_failed))
         any_failed = True
     if not any_failed and exit_codes.output_lost(code, capture.file_error):
-        cases.append(_output_lost_case(result, capture))
+        cases.append(_output_lost_case(result, capture, request.output_file))
         any_failed = True
     output = capture.tail_text() if any_failed or code else ""
     rendered = result.write(cases, outcome.duration, output, checked=True)
@@ -896,10 +903,10 @@ def _streams_noted(result: ResultFile, capture: OutputCapture) -> None:
         result.properties["console_error"] = capture.console_error
 
 
-def _output_lost_case(result: ResultFile, capture: OutputCapture) -> Case:
+def _output_lost_case(result: ResultFile, capture: OutputCapture, output_file: Path | None) -> Case:
     """An error case for a test that passed but whose --output-file lost output (full disk)."""
     message = (
-        f"{capture.file_error}; so --output-file {result.request.output_file} is incomplete "
+        f"{capture.file_error}; so --output-file {output_file} is incomplete "
         "(the console and this result file got the output); free space or choose another path"
     )
     return Case.saying(result.suite_name, "output file", Outcome.ERROR, message)
@@ -910,7 +917,7 @@ def report_usage_error(message: str, result_file: Path | None) -> int:
     _keep_standard_descriptors()
     # Never run: built-in settings, so a usage error never reads (nor trips on) a variable.
     request = RunRequest((), Mode.AMENT, settings.defaults(), result_file=result_file)
-    result = ResultFile(request)
+    result = _result_file(request)
     try:
         result.prepare()
     except OSError:

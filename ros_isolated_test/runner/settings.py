@@ -32,6 +32,7 @@ from ros_isolated_test.domain_coordinator.resources import (
     show_amount,
 )
 from ros_isolated_test.runner import discovery, partition
+from ros_isolated_test.switches import NotOnOff, on_off
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -52,8 +53,6 @@ ISOLATION_ENV = "ROS_ISOLATED_TEST_ISOLATION"
 #: the test's own too, no waiting for an ID; ``auto``: namespace where allowed, else domain.
 ISOLATION_MODES = ("domain", "namespace", "auto")
 DEFAULT_ISOLATION = "domain"
-#: Values of DISABLE_ROS_ISOLATION that do not disable (upstream treats "set" as disabled).
-_FALSE_WORDS = frozenset({"", "0", "false", "no", "off"})
 
 __all__ = [
     "CAPACITY_ENV",
@@ -157,8 +156,14 @@ class Settings:
 
 
 def disables_isolation(value: str | None) -> bool:
-    """DISABLE_ROS_ISOLATION as upstream reads it (set means disabled), except explicit no's."""
-    return value is not None and value.strip().lower() not in _FALSE_WORDS
+    """DISABLE_ROS_ISOLATION as upstream reads it (set means disabled), except explicit no's.
+
+    Unset or blank does not disable; nor does an off word; any other value does.
+    """
+    try:
+        return on_off(value, unset=False)
+    except NotOnOff:
+        return True
 
 
 def isolation_from(text: str, origin: str = ISOLATION_ENV) -> str:

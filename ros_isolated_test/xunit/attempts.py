@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import re
 
+from ros_isolated_test.xunit.gitlab import distinct_gitlab_keys
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 
 TYPE_CHECKING = False
@@ -86,9 +87,7 @@ def merge_attempts(attempts: Sequence[Suite]) -> Suite:
         cases.append(_merged(absent, seen))
     properties = dict(last.properties)
     if len({f"{case.classname}_{case.name}" for case in cases}) < len(cases):
-        # Cases of different attempts may share a GitLab key; rare, so loaded only then.
-        from ros_isolated_test.xunit.normalise import distinct_gitlab_keys
-
+        # Cases of different attempts may share a GitLab key (rare).
         properties[RENAMED_PROPERTY] = distinct_gitlab_keys(cases)
     for number in _kept_numbers(total - 1):
         for key, value in attempts[number - 1].properties.items():

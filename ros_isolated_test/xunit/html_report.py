@@ -29,7 +29,6 @@ from typing import IO
 
 from ros_isolated_test import __version__
 from ros_isolated_test.atomic_file import NotReplaceableError, discards, special_kind
-from ros_isolated_test.runner.request import test_name_of
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import html_assets, normalise, reader
 from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY, NOT_RUN_AGAIN_TYPE
@@ -41,6 +40,7 @@ from ros_isolated_test.xunit.result_file import (
     STARTED_AT,
     WAIT_DOMAIN,
     WAIT_RESOURCES,
+    test_name_of,
 )
 
 #: Characters of a message, a failure's text and an output tail shown per case.

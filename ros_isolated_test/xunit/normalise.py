@@ -6,8 +6,8 @@ are generic where they can be and keyed to a producer's shape where not: gtest's
 nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases, launch_testing's
 text-only-in-message, xmlrunner's timestamped suite names, ctest's missing ``errors``
 and empty output, gtest and ctest disabled tests shown as passed. Some fixes are for one
-reader: GitLab's case key and its XML type converter (see ``distinct_gitlab_keys`` and
-``serialise.gitlab_safe_type``), Jenkins dropping a suite without cases (``no_cases``).
+reader: GitLab's case key and its XML type converter (their rules: ``gitlab``), Jenkins
+dropping a suite without cases (``no_cases``).
 """
 
 from __future__ import annotations
@@ -16,18 +16,14 @@ import math
 import re
 from collections.abc import Iterable
 
-from ros_isolated_test.xunit.bounded_text import bounded
+from ros_isolated_test.text import bounded
+from ros_isolated_test.xunit.gitlab import distinct_gitlab_keys, gitlab_safe_types
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome
 from ros_isolated_test.xunit.reader import (
     MAX_OUTCOMES,
     RawCase,
     RawOutcome,
     ReadResult,
-)
-from ros_isolated_test.xunit.serialise import (
-    GITLAB_CONVERTED_TYPES,
-    TYPE_LIMIT,
-    gitlab_safe_type,
 )
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token
 
@@ -85,7 +81,7 @@ def cases_from(read: ReadResult, package: str | None, fallback: str) -> list[Cas
     renamed = distinct_gitlab_keys(cases)
     if renamed:
         read.repairs.append(renamed)
-    retyped = _gitlab_safe_types(cases)
+    retyped = gitlab_safe_types(cases)
     if retyped:
         read.repairs.append(retyped)
     if not cases:
@@ -132,59 +128,6 @@ def no_cases(classname: str) -> Case:
         "selection or discovery is usually a mistake in the test's configuration."
     )
     return Case.saying(classname, "no test cases", Outcome.SKIPPED, message, "NoTestCases")
-
-
-def _gitlab_safe_types(cases: list[Case]) -> str:
-    """Say which types the serialiser will write safely; checked as written: trimmed."""
-    found: list[str] = []
-    for case in cases:
-        items: list[Case | Attempt] = [case, *case.attempts]
-        for item in items:
-            written = name_token(item.type, "", TYPE_LIMIT)
-            if written in GITLAB_CONVERTED_TYPES:
-                found.append(written)
-                item.type = gitlab_safe_type(written)
-    if not found:
-        return ""
-    kinds = ", ".join(sorted(set(found)))
-    return (
-        f"{len(found)} type attribute(s) GitLab's XML converter would act on ({kinds}) "
-        "were written as '<type> (producer type)'"
-    )
-
-
-def distinct_gitlab_keys(cases: list[Case]) -> str:
-    """Rename a case whose GitLab key another case already has; say what was renamed.
-
-    GitLab keys a case by ``"<suite>_<classname>_<name>"`` and keeps one per key, so
-    classname ``pkg.a`` + name ``b_c`` and ``pkg.a_b`` + ``c`` would become one case
-    there while every other reader shows two. The later one gets a number, visibly.
-    """
-    keys: set[str] = set()
-    pairs = {(case.classname, case.name) for case in cases}
-    renamed: list[str] = []
-    for case in cases:
-        key = f"{case.classname}_{case.name}"
-        if key not in keys:
-            keys.add(key)
-            continue
-        number = 2
-        while True:
-            name = f"{case.name} [{number}]"
-            if f"{case.classname}_{name}" not in keys and (case.classname, name) not in pairs:
-                break
-            number += 1
-        renamed.append(f"{case.classname} {case.name!r} as {name!r}")
-        case.name = name
-        pairs.add((case.classname, name))
-        keys.add(f"{case.classname}_{name}")
-    if not renamed:
-        return ""
-    shown = "; ".join(renamed[:5]) + ("; ..." if len(renamed) > 5 else "")
-    return (
-        f"{len(renamed)} test case(s) renamed whose GitLab key (classname_name) another "
-        f"case already had: {shown}"
-    )
 
 
 def _count(attrs: dict[str, str], *names: str) -> int:

@@ -26,8 +26,8 @@ from typing import BinaryIO, cast
 
 from lxml import etree
 
+from ros_isolated_test.text import BoundedText, bounded, cut_mark, shown_code
 from ros_isolated_test.xunit import xml_text
-from ros_isolated_test.xunit.bounded_text import BoundedText, bounded
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT
 
 #: Read at most this much of a file; the rest is reported, not parsed.
@@ -111,7 +111,7 @@ def _count_and_show(error: UnicodeError) -> tuple[str, int]:
     assert isinstance(error, UnicodeDecodeError)
     bad = error.object[error.start : error.end]
     _counts.invalid = getattr(_counts, "invalid", 0) + len(bad)
-    return "".join(f"\\x{byte:02x}" for byte in bad), error.end
+    return "".join(map(shown_code, bad)), error.end
 
 
 codecs.register_error("ros_isolated_test.count", _count_and_show)
@@ -534,7 +534,7 @@ class _ValueCut:
             if partial:
                 self.cut += partial.end()
                 tail = tail[partial.end() :]
-            out.append(f"&#10;[... {self.cut} characters cut ...]&#10;")
+            out.append(cut_mark(self.cut).replace("\n", "&#10;"))
         out.append(tail)
 
 
@@ -839,14 +839,14 @@ class _Sanitiser:
 
     def _show(self, match: re.Match[str]) -> str:
         self.illegal += 1
-        return xml_text.shown_code(ord(match.group()))
+        return shown_code(ord(match.group()))
 
     def _show_reference(self, match: re.Match[str]) -> str:
         code = int(match.group(1), 16) if match.group(1) else int(match.group(2))
         if xml_text.legal(code) and code != 0xFFFD:
             return match.group()
         self.illegal += 1
-        return xml_text.shown_code(code)
+        return shown_code(code)
 
     def _skip_prolog(self, text: str, final: bool = False) -> tuple[str, str]:
         """Drop everything before the root element but the DOCTYPE, streaming.

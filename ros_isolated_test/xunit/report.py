@@ -17,11 +17,11 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator.holder import display_text
-from ros_isolated_test.runner.request import test_name_of
+from ros_isolated_test.text import display_text
 from ros_isolated_test.xunit import normalise, reader
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
 from ros_isolated_test.xunit.model import Case, Outcome
+from ros_isolated_test.xunit.result_file import test_name_of
 
 
 @dataclass

@@ -34,9 +34,8 @@ from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Sequence
 
-    from ros_isolated_test.runner.request import RunRequest
     from ros_isolated_test.xunit import reader
 
 NO_RESULT = "The test did not generate a result file."
@@ -59,6 +58,15 @@ WAIT_RESOURCES = "wait_resources_seconds"
 DOMAIN_POOL = "domain_pool"
 
 
+def test_name_of(result_file: Path) -> str:
+    """The test a result file belongs to: its name without the producer's suffix."""
+    name = result_file.name
+    for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
 def instant(when: float) -> str:
     """``when`` as local ISO 8601 to the microsecond, with its zone: ordered across hosts.
 
@@ -75,9 +83,13 @@ def instant(when: float) -> str:
 
 
 def timeline_properties(
-    started: float, ended: float, waited: float, waited_resources: float, pool: tuple[int, ...]
+    started: float, ended: float, waited: float, waited_resources: float, pool: str
 ) -> dict[str, str]:
-    """The properties of one attempt for the timeline (see :data:`STARTED_AT`)."""
+    """The properties of one attempt for the timeline (see :data:`STARTED_AT`).
+
+    ``pool`` is the pool the ID came from as ID ranges (``102-110, 150``), empty when
+    the test held no ID.
+    """
     found = {
         STARTED_AT: instant(started),
         ENDED_AT: instant(ended),
@@ -85,20 +97,25 @@ def timeline_properties(
         WAIT_RESOURCES: f"{waited_resources:.3f}",
     }
     if pool:
-        from ros_isolated_test.domain_coordinator.pool import id_ranges
-
-        found[DOMAIN_POOL] = id_ranges(pool)
+        found[DOMAIN_POOL] = pool
     return found
 
 
 class ResultFile:
-    """The request's result file; every method is a no-op when none was asked for."""
+    """A test's result file at ``path``; every method is a no-op when none was asked for.
 
-    def __init__(self, request: RunRequest) -> None:
-        self.request = request
-        self.path = request.result_file
+    ``package`` and ``test_name`` name the suite (``<package>.<test name>``); the
+    ``command`` is recorded among its properties.
+    """
+
+    def __init__(
+        self, path: Path | None, command: Sequence[str], package: str, test_name: str
+    ) -> None:
+        self.path = path
+        self.package = package
+        self.test_name = test_name
         self.started = time.time()
-        self.properties: dict[str, str] = {"command": shlex.join(request.command)}
+        self.properties: dict[str, str] = {"command": shlex.join(command)}
         self.placeholder: bytes | None = None
         #: What was wrong with the test's own file, for the console.
         self.problems: list[str] = []
@@ -224,14 +241,14 @@ class ResultFile:
 
     def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
         """The test as one case, for a test that wrote no result of its own."""
-        case = Case.saying(self.suite_name, shown(self.request.test_name), outcome, shown(message))
+        case = Case.saying(self.suite_name, shown(self.test_name), outcome, shown(message))
         case.time = duration
         return case
 
     @property
     def suite_name(self) -> str:
         """``<package>.<test name>``: unique across a build, as CI reports need."""
-        return shown(f"{self.request.package}.{self.request.test_name}")
+        return shown(f"{self.package}.{self.test_name}")
 
     def _suite(
         self, cases: list[Case], duration: float, properties: dict[str, str], output: str = ""
@@ -477,7 +494,7 @@ class ResultFile:
         assert self.path is not None and self.original is not None
         beside = self.own is not None and os.path.lexists(self.own)
         source = self.own if beside and self.own is not None else self.path
-        cases, read = read_cases(source, self.request.package, self.request.test_name)
+        cases, read = read_cases(source, self.package, self.test_name)
         self.problems = read.problems + read.repairs
         if read.repairs:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)

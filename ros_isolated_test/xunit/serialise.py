@@ -14,6 +14,7 @@ from collections.abc import Iterable
 
 from ros_isolated_test import __version__
 from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT, attempt_count, kept
+from ros_isolated_test.xunit.gitlab import written_type
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
 
@@ -36,30 +37,6 @@ _TEXT = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", "\r": "&#13;"})
 _FLAKY_NOTE = re.compile(
     r"\APassed after [0-9]+ failed attempt\(s\); [^\n]{0,80}recorded below\.\n?"
 )
-#: Characters kept of a ``type`` attribute.
-TYPE_LIMIT = 256
-#: ``type`` values GitLab's XML converter (ActiveSupport's ``Hash.from_xml``, matched
-#: exactly as written) acts on: ``symbol`` and ``yaml`` are refused, which drops the whole
-#: file; ``date``/``datetime`` fail on text that is no date; the others turn the element's
-#: text into a number, a decoded blob or an empty list. ``string`` is harmless.
-GITLAB_CONVERTED_TYPES = frozenset(
-    {
-        "symbol",
-        "yaml",
-        "date",
-        "datetime",
-        "dateTime",
-        "integer",
-        "float",
-        "double",
-        "decimal",
-        "boolean",
-        "base64Binary",
-        "binary",
-        "file",
-        "array",
-    }
-)
 
 
 def attribute(value: str) -> str:
@@ -70,19 +47,6 @@ def attribute(value: str) -> str:
 def text(value: str) -> str:
     """A legal-XML value escaped for element content."""
     return value.translate(_TEXT)
-
-
-def gitlab_safe_type(value: str) -> str:
-    """A ``type`` that GitLab's converter leaves alone, keeping what the producer said."""
-    return f"{value} (producer type)" if value in GITLAB_CONVERTED_TYPES else value
-
-
-def written_type(value: str, fallback: str = "") -> str:
-    """A ``type`` as written: one trimmed line, checked for GitLab after trimming.
-
-    The check must see the final value: ``"yaml "`` written as ``"yaml"`` drops the file.
-    """
-    return gitlab_safe_type(name_token(value, fallback, TYPE_LIMIT))
 
 
 def _seconds(value: float) -> str:

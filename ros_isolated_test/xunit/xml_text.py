@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from functools import cache
 
-from ros_isolated_test.xunit.bounded_text import bounded
+from ros_isolated_test.text import bounded, shown_code
 
 #: Characters kept of one text (a message, a failure's text, a system-out).
 TEXT_LIMIT = 64 * 1024
@@ -36,11 +36,6 @@ def legal(code: int) -> bool:
     )
 
 
-def shown_code(code: int) -> str:
-    r"""How a code point XML cannot carry is written instead: ``\x1b``, ``\ud800``."""
-    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
-
-
 #: str.translate table showing every C0 control XML forbids, at C speed.
 CONTROL_TABLE = {code: shown_code(code) for code in range(0x20) if code not in (0x9, 0xA, 0xD)}
 
@@ -61,7 +56,4 @@ def xml_safe(text: str, limit: int | None = None) -> str:
 def name_token(text: str, default: str, limit: int = 512) -> str:
     """A name every reader takes: one line, no edge spaces, bounded, never empty."""
     text = " ".join(xml_safe(text).split())
-    if len(text) > limit:
-        half = limit // 2
-        text = f"{text[:half]} [...] {text[-half:]}"
-    return text or default
+    return bounded(text, limit, mark=" [...] ") or default

@@ -10,7 +10,8 @@ at once, proving no two held one ID), readers (how colcon, xunit-viewer, junitpa
 GitLab and Jenkins read a result file), docker_engine (a real Docker engine, the stand-in
 base and the project's image, built once), chromium (headless Chromium: a page's DOM, a
 screenshot, every request counted), result_tree (a large results tree, made quickly),
-capabilities (the only way to skip). Test modules import from here, never from each
+imports (the package's import graph from its source: circles, imports against the
+layers), capabilities (the only way to skip). Test modules import from here, never from each
 other and never from ``conftest``, which holds fixtures only. The other ``*.py`` here are
 programs the tests run as processes (talkers, listeners, gate).
 """

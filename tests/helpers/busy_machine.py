@@ -25,9 +25,9 @@ from pathlib import Path
 
 from ros_isolated_test.domain_coordinator import participants, squatters
 from ros_isolated_test.domain_coordinator.lock_dir import lock_dir_from_env
+from ros_isolated_test.domain_coordinator.lock_files import probe_lock
 from ros_isolated_test.domain_coordinator.pool import DEFAULT_SPEC, parse_pool
 from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
-from ros_isolated_test.domain_coordinator.reservation import probe_lock
 
 #: Set to 1 to run the suite on a quiet machine (debugging only; CI keeps the scene).
 QUIET_ENV = "ROS_ISOLATED_TEST_QUIET_MACHINE"

@@ -15,9 +15,9 @@ import pytest
 
 from ros_isolated_test.domain_coordinator import participants, squatters
 from ros_isolated_test.domain_coordinator.lock_dir import lock_dir_from_env
+from ros_isolated_test.domain_coordinator.lock_files import probe_lock
 from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
 from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
-from ros_isolated_test.domain_coordinator.reservation import probe_lock
 
 HIGH_IDS = range(215, HIGHEST_VALID_ID + 1)
 

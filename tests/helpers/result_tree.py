@@ -106,7 +106,9 @@ def _suite(
     }
     if heavy:
         properties.update({"resources": "cpu=1", "capacity": "cpu=2"})
-    properties.update(timeline_properties(started, started + duration, waited, 0.0, tuple(pool)))
+    properties.update(
+        timeline_properties(started, started + duration, waited, 0.0, id_ranges(pool))
+    )
     if failed and cases:
         first = cases[0]
         first.outcome = Outcome.FAILURE

@@ -174,6 +174,8 @@ def _xml(text: str) -> str:
 
     Surrogates (undecodable bytes of a path) and control characters are shown, never
     written, so the document always parses; blanks at the ends would break a name.
+    Each as ``ros_isolated_test.text.shown_code`` shows it, in a copy kept here on purpose:
+    this runs exactly when the package cannot be imported, so it cannot import that one.
     """
     shown: list[str] = []
     for char in text.strip():
