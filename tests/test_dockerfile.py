@@ -19,7 +19,7 @@ from fnmatch import fnmatchcase
 from pathlib import PurePosixPath
 
 import pytest
-from helpers import capabilities
+from helpers import capabilities, docs
 from helpers.commands import REPO, run_cli
 from helpers.docker_engine import HOST_NAMESPACES, STANDIN_DOCKERFILE
 
@@ -448,7 +448,7 @@ def test_the_dockerignore_keeps_local_and_build_output_out(
     assert is_ignored(path, patterns)
 
 
-# -- the README shows how to run the image --------------------------------------------------
+# -- the docs show how to run the image -----------------------------------------------------
 
 
 def docker_commands(text: str, verb: str) -> list[list[str]]:
@@ -491,12 +491,14 @@ def volumes(command: list[str]) -> list[tuple[str, str]]:
     return mounts
 
 
-def test_the_readme_shows_docker_run_with_the_shared_lock_dir_and_host_namespaces() -> None:
-    """The line tests/test_docker_engine.py runs: host network, IPC and PID, one lock dir."""
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
+@pytest.mark.parametrize("page", ["README", "isolation"])
+def test_the_docs_show_docker_run_with_the_shared_lock_dir_and_host_namespaces(page: str) -> None:
+    """The line tests/test_docker_engine.py runs: host network, IPC and PID, one lock dir; on
+    the front page's Docker block and in the isolation model's Docker section."""
+    text = docs.readme() if page == "README" else docs.page(page)
     image = image_name()
-    runs = [command for command in docker_commands(readme, "run") if image in command]
-    assert runs, f"README has no 'docker run ... {image}' line"
+    runs = [command for command in docker_commands(text, "run") if image in command]
+    assert runs, f"{page} has no 'docker run ... {image}' line"
     default = str(lock_dir_from_env({}))
     shared = []
     namespaces = dict(zip(HOST_NAMESPACES[::2], HOST_NAMESPACES[1::2], strict=True))
@@ -513,4 +515,4 @@ def test_the_readme_shows_docker_run_with_the_shared_lock_dir_and_host_namespace
         if host_network and any(inside == lock_dir for _, inside in volumes(command)):
             shared.append(command)
     flags = " ".join(HOST_NAMESPACES)
-    assert shared, f"README has no 'docker run {flags} -v {default}:{default} ... {image}'"
+    assert shared, f"{page} has no 'docker run {flags} -v {default}:{default} ... {image}'"
