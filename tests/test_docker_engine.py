@@ -136,6 +136,16 @@ def wait_until_started(marker: Path, process: subprocess.Popen[str], log: Path) 
     assert marker.exists(), f"the container ended first:\n{output_of(log)}"
 
 
+def start_test(
+    containers: Containers, options: list[str], command: list[str], log: Path, marker: Path
+) -> tuple[str, subprocess.Popen[str]]:
+    """A container whose runner runs ``command`` (result ``t.xml``), once its test made
+    ``marker``."""
+    name, process = containers.start(options, run_args("t.xml", *command), log)
+    wait_until_started(marker, process, log)
+    return name, process
+
+
 # --- the image -----------------------------------------------------------------------------
 
 
@@ -170,12 +180,13 @@ def test_docker_stop_passes_sigterm_on_and_the_result_names_the_id(
 ) -> None:
     (domain_id,) = free_ids(1)
     log = tmp_path / "container.log"
-    name, process = containers.start(
+    name, process = start_test(
+        containers,
         [*mounts(lock_dir, results), *pool(domain_id)],
-        run_args("t.xml", "sh", "-c", TRAP_SCRIPT),
+        ["sh", "-c", TRAP_SCRIPT],
         log,
+        results / "ready",
     )
-    wait_until_started(results / "ready", process, log)
     # SIGKILL only after 120 s: far later than a test that got its SIGTERM takes to end.
     engine.docker("stop", "--time", "120", name, timeout=HUNG + 120)
     code = process.wait(timeout=HUNG)
@@ -196,12 +207,13 @@ def test_docker_kill_leaves_the_placeholder(
     """SIGKILL ends PID 1 at once: the placeholder written before the test is what stays."""
     (domain_id,) = free_ids(1)
     log = tmp_path / "container.log"
-    name, process = containers.start(
+    name, process = start_test(
+        containers,
         [*mounts(lock_dir, results), *pool(domain_id)],
-        run_args("t.xml", "sh", "-c", "echo ready > ready; while :; do sleep 0.1; done"),
+        ["sh", "-c", "echo ready > ready; while :; do sleep 0.1; done"],
         log,
+        results / "ready",
     )
-    wait_until_started(results / "ready", process, log)
     engine.docker("kill", "--signal", "KILL", name)
     code = process.wait(timeout=HUNG)
     assert code == 128 + signal.SIGKILL, output_of(log)
@@ -412,12 +424,13 @@ def test_a_host_runner_waits_for_the_id_a_container_holds_through_the_lock_dir(
         "echo $ROS_DOMAIN_ID > container.id; while [ ! -e go ]; do sleep 0.05; done; "
         "touch container.done"
     )
-    _, process = containers.start(
+    _, process = start_test(
+        containers,
         [*mounts(lock_dir, results), *pool(domain_id)],
-        run_args("t.xml", "sh", "-c", container_test),
+        ["sh", "-c", container_test],
         log,
+        results / "container.id",
     )
-    wait_until_started(results / "container.id", process, log)
     # The host's test notes whether the container's had ended when it started.
     host_test = (
         f"cd {results}; [ -e container.done ] && echo after > host.order; "
@@ -447,12 +460,13 @@ def test_a_container_and_a_host_runner_sharing_the_lock_dir_hold_distinct_ids_at
 ) -> None:
     ids = free_ids(2)
     log = tmp_path / "container.log"
-    _, process = containers.start(
+    _, process = start_test(
+        containers,
         [*mounts(lock_dir, results), *pool(*ids)],
-        run_args("t.xml", "sh", "-c", meet("container", "host")),
+        ["sh", "-c", meet("container", "host")],
         log,
+        results / "container.id",
     )
-    wait_until_started(results / "container.id", process, log)
     host = host_runner(children, env, f"cd {results}; {meet('host', 'container')}", *ids)
     stdout, stderr = host.communicate(timeout=HUNG)
     assert host.returncode == 0, stdout + stderr
@@ -473,12 +487,13 @@ def test_control_without_the_shared_lock_dir_both_hold_one_id_at_once(
     (domain_id,) = free_ids(1)
     log = tmp_path / "container.log"
     its_own = tmp_path_factory.mktemp("container-locks")
-    _, process = containers.start(
+    _, process = start_test(
+        containers,
         [*mounts(its_own, results), *pool(domain_id)],
-        run_args("t.xml", "sh", "-c", meet("container", "host")),
+        ["sh", "-c", meet("container", "host")],
         log,
+        results / "container.id",
     )
-    wait_until_started(results / "container.id", process, log)
     host = host_runner(children, env, f"cd {results}; {meet('host', 'container')}", domain_id)
     stdout, stderr = host.communicate(timeout=HUNG)
     assert host.returncode == 0, stdout + stderr

@@ -18,6 +18,7 @@ import json
 import re
 import shutil
 import subprocess
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,21 +66,27 @@ PROBES_XML = f"""<?xml version="1.0"?>
 </package>
 """
 
-PROBES_CMAKE = f"""cmake_minimum_required(VERSION 3.20)
-project({PROBES} NONE)
-find_package(ament_cmake REQUIRED)
-if(BUILD_TESTING)
-  find_package({PACKAGE} REQUIRED)
-  ros_isolated_test_all()
-  foreach(_token IN ITEMS {" ".join(TOKENS)})
+
+def _probe_tests(tokens: Sequence[str]) -> str:
+    """CMake registering one plain crosstalk-probe test per token."""
     # A queued test waits inside its runner: TIMEOUT covers the wait for an ID too.
+    return f"""  foreach(_token IN ITEMS {" ".join(tokens)})
     ament_add_test(probe_${{_token}}
       COMMAND "${{Python3_EXECUTABLE}}" "${{CMAKE_CURRENT_SOURCE_DIR}}/test/token_talker.py"
         "${{_token}}"
       TIMEOUT 120
       GENERATE_RESULT_FOR_RETURN_CODE_ZERO)
   endforeach()
-endif()
+"""
+
+
+PROBES_CMAKE = f"""cmake_minimum_required(VERSION 3.20)
+project({PROBES} NONE)
+find_package(ament_cmake REQUIRED)
+if(BUILD_TESTING)
+  find_package({PACKAGE} REQUIRED)
+  ros_isolated_test_all()
+{_probe_tests(TOKENS)}endif()
 ament_package()
 """
 
@@ -323,14 +330,7 @@ project({ZERO_EDIT} NONE)
 find_package(ament_cmake REQUIRED)
 if(BUILD_TESTING)
   find_package(ament_cmake_test REQUIRED)
-  foreach(_token IN ITEMS {" ".join(TOKENS[:2])})
-    ament_add_test(probe_${{_token}}
-      COMMAND "${{Python3_EXECUTABLE}}" "${{CMAKE_CURRENT_SOURCE_DIR}}/test/token_talker.py"
-        "${{_token}}"
-      TIMEOUT 120
-      GENERATE_RESULT_FOR_RETURN_CODE_ZERO)
-  endforeach()
-endif()
+{_probe_tests(TOKENS[:2])}endif()
 ament_package()
 """
 
