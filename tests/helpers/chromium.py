@@ -97,8 +97,9 @@ class RequestCounter:
                     self.requests.append("(a connection that sent nothing)")
 
     def page_requests(self) -> list[str]:
-        """The requests counted, less Chromium's own (:data:`BROWSER_OWN`)."""
-        return [line for line in self.requests if host_of(line) not in BROWSER_OWN]
+        """The requests counted, less Chromium's own (:data:`BROWSER_OWN`) and connections
+        that closed before naming a target (they reached nothing)."""
+        return [line for line in self.requests if host_of(line) not in {"", *BROWSER_OWN}]
 
     def close(self) -> None:
         self._server.close()
