@@ -371,7 +371,7 @@ class Section:
     notes: list[str] = field(default_factory=list)
 
     def render(self) -> str:
-        """Markdown, so the output can be pasted into the README as it is."""
+        """Markdown, so the output can be pasted into docs/performance.md as it is."""
         lines = [f"### {self.title}", ""]
         lines.append("| " + " | ".join(self.header) + " |")
         lines.append("|" + "|".join("---" for _ in self.header) + "|")

@@ -2,10 +2,10 @@
 
 The runner starts once per test and its own work is a few milliseconds, so every module
 it imports is paid by every test. Some jobs a library would do are written by hand for
-that reason (the README's layout section lists them, with these figures). This measures,
-for each library, what importing it adds on top of the RUNNER's own imports
-(``ros_isolated_test.runner.ament.args``), in fresh interpreters of this venv, bytecode
-cached, as under colcon (the ROS wheels' re-exec already done):
+that reason (the "Written by hand" table of docs/contributing.md lists them, with these
+figures). This measures, for each library, what importing it adds on top of the
+RUNNER's own imports (``ros_isolated_test.runner.ament.args``), in fresh interpreters of
+this venv, bytecode cached, as under colcon (the ROS wheels' re-exec already done):
 
 - *import time*: ``-X importtime``'s cumulative time of the modules the library's import
   adds (those the RUNNER had not loaded), median of N runs;
@@ -47,7 +47,7 @@ BASELINE = "ros_isolated_test.runner.ament.args"
 LIBRARIES = (
     ("pydantic_settings", "pydantic-settings", "settings: `runner/settings.py`"),
     ("junitparser", "junitparser", "result files: `xunit/reader.py`, `xunit/serialise.py`"),
-    ("tabulate", "tabulate", "the `status` table: `cli.py`"),
+    ("tabulate", "tabulate", "the `status` table: `runner/status_table.py`"),
     ("filelock", "filelock", "the lock: one `fcntl.flock`, `domain_coordinator/flock.py`"),
     ("xml.sax.saxutils", None, "XML escaping: `xunit/serialise.py`"),
     ("psutil", "psutil", "processes: `process/proc.py`"),
@@ -187,7 +187,7 @@ def measure(python: str, base_env: Mapping[str, str], quick: bool, work: Path) -
 
 
 def _shown(path: str) -> str:
-    """``path`` relative to the checkout when inside it: the table goes into the README."""
+    """``path`` relative to the checkout when inside it: the table goes into the docs."""
     try:
         return str(Path(path).relative_to(REPO))
     except ValueError:

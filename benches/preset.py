@@ -69,7 +69,7 @@ def run(ctx: Context) -> Section:
         )
     section.notes.append(
         "Not timed. Refusing is ours by design (a preset ID would put the test on a domain "
-        "nobody reserved: the README's 'no silent sharing'); `DISABLE_ROS_ISOLATION=1` is "
+        "nobody reserved: docs/isolation.md's 'no silent sharing'); `DISABLE_ROS_ISOLATION=1` is "
         "the way to run on a chosen domain."
     )
     for runner, why in ctx.missing.items():

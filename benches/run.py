@@ -9,7 +9,7 @@ extra), and with Kilted's upstream (the same script name, putting rmw_test_fixtu
 interpreter and an environment. Results are ratios of medians; absolute times are
 context only, as they move with the machine's load. ``--quick`` runs each benchmark
 briefly (CI runs it so the benchmarks never rot; it asserts no threshold). The output
-is Markdown: the README's performance section is one run's output pasted as it is.
+is Markdown: docs/performance.md holds one run's output pasted as it is.
 
 The coordinators bind upstream's TCP ports 32769-32869, and the benchmarks take all of
 them at once: so that other runners on the machine are neither disturbed nor disturbing,

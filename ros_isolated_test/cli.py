@@ -32,7 +32,6 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from typing import NoReturn
 
-    from ros_isolated_test.domain_coordinator.status import HeldDomain
     from ros_isolated_test.xunit.report import FileReport
 
 EXIT_CODES_HELP = """\b
@@ -358,11 +357,8 @@ def status(as_json: bool) -> None:
     "resources") and the capacity (one row with "via": "capacity"), when resources are
     held, asked for, or ROS_ISOLATED_TEST_CAPACITY is set.
     """
-    from ros_isolated_test.domain_coordinator.holder import iso_time
-    from ros_isolated_test.domain_coordinator.holdings import holds
-    from ros_isolated_test.domain_coordinator.queue import Queue
-    from ros_isolated_test.domain_coordinator.resources import capacity_for, describe
-    from ros_isolated_test.domain_coordinator.status import held_domains
+    from ros_isolated_test.domain_coordinator.status import machine_status
+    from ros_isolated_test.runner import status_table
 
     try:
         # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.
@@ -373,111 +369,11 @@ def status(as_json: bool) -> None:
         sys.exit(2)
     for note in config.notes:  # the pool a runner here would use; on stderr: --json parses
         click.echo(f"ros-isolated-test: {note}", err=True)
-    lock_dir = config.lock_dir
-    held = held_domains(lock_dir, config.pool)
-    queue = Queue(lock_dir)
-    waiters = queue.waiters()
-    # A planted shared queue folder: runners still queue (per user), but whoever planted
-    # it should be found. On stderr: --json stays parseable.
-    problem = queue.shared_problem()
-    if problem is not None:
-        click.echo(f"ros-isolated-test: note: {problem}", err=True)
-    held_resources = holds(lock_dir)
-    # The capacity this shell's settings give, with what runners holding something were
-    # given for names it does not set (they may have been started elsewhere).
-    capacity = capacity_for(["cpu", "mem"], config.capacity)
-    for hold in held_resources:
-        for name, amount in hold.capacity.items():
-            capacity.setdefault(name, amount)
-    capacity.update(config.capacity)
-    # Said only where resources are in play: held, asked for, or a capacity set here.
-    in_play = bool(held_resources or config.capacity or any(w.resources for w in waiters))
-    if as_json:
-        rows: list[dict[str, object]] = [
-            {
-                "domain_id": item.domain_id,
-                "via": item.via,
-                **(item.holder.as_dict() if item.holder else {}),
-                **({"gz_partition": gz} if (gz := _gz_partition(item)) else {}),
-                **({"ports": list(item.ports)} if item.ports else {}),
-            }
-            for item in held
-        ]
-        rows += [{**waiter.as_dict(), "domain_id": None, "via": "queue"} for waiter in waiters]
-        rows += [{**hold.as_dict(), "via": "hold"} for hold in held_resources]
-        if in_play:
-            rows.append({"via": "capacity", "domain_id": None, "capacity": capacity})
-        click.echo(json.dumps(rows, indent=2))
-        return
-    if not held:
-        click.echo(f"No domain ID of the pool is held (lock directory {lock_dir}).")
-    else:
-        _print_held(held)
-    if waiters:
-        click.echo("")
-        click.echo(f"Waiting for a domain ID ({len(waiters)}, first come, first served):")
-        click.echo(f"{'POS':>3}  {'PID':>7}  {'USER':<10} {'WAITING SINCE':<19}  COMMAND")
-        for waiter in waiters:
-            asks = f"[{describe(waiter.resources)}] " if waiter.resources else ""
-            click.echo(
-                f"{waiter.position:>3}  {waiter.pid:>7}  {waiter.user:<10.10} "
-                f"{waiter.since_iso:<19}  {asks}{waiter.command}"
-            )
-    if not in_play:
-        return
-    click.echo("")
-    click.echo(f"Resources (capacity {describe(capacity)}):")
-    if not held_resources:
-        click.echo("  none held")
-        return
-    click.echo(f"{'PID':>7}  {'USER':<10} {'SINCE':<19}  {'ID':>3}  {'HOLDS':<20} COMMAND")
-    for hold in held_resources:
-        domain = "-" if hold.domain_id is None else str(hold.domain_id)
-        # A hold its runner left to survivors of its test: they are what keeps it.
-        kept = f"(survivors {', '.join(map(str, hold.survivors))}) " if hold.survivors else ""
-        click.echo(
-            f"{hold.pid:>7}  {hold.user:<10.10} {iso_time(hold.since):<19}  {domain:>3}  "
-            f"{describe(hold.resources):<20} {kept}{hold.command}"
-        )
-
-
-def _gz_partition(item: HeldDomain) -> str | None:
-    """The Gazebo partition a runner's test has: a function of its record, as the runner made it.
-
-    A runner with ROS_ISOLATED_TEST_GZ_PARTITION=off set none; its record cannot say so.
-    """
-    from ros_isolated_test.runner import partition
-
-    if item.via != "lock" or item.holder is None:
-        return None
-    return partition.name(item.holder.host, item.domain_id, item.holder.pid)
-
-
-def _print_held(held: list[HeldDomain]) -> None:
-    from ros_isolated_test.domain_coordinator.status import anonymous_holder
-
-    names = {id(item): _gz_partition(item) or "-" for item in held}
-    width = max(len("GZ_PARTITION"), *map(len, names.values()))
-    click.echo(
-        f"{'ID':>3}  {'HELD BY':<11} {'PID':>7}  {'USER':<10} {'STARTED':<19}  "
-        f"{'GZ_PARTITION':<{width}}  COMMAND"
-    )
-    kinds = {"lock": "runner", "port": "port", "environment": "squatter"}
-    for item in held:
-        kind = kinds.get(item.via, item.via)
-        gz = names[id(item)]
-        if item.holder is None:
-            who = anonymous_holder(item)
-            click.echo(
-                f"{item.domain_id:>3}  {kind:<11} {'-':>7}  {'-':<10} {'-':<19}  "
-                f"{gz:<{width}}  {who}"
-            )
-            continue
-        holder = item.holder
-        click.echo(
-            f"{item.domain_id:>3}  {kind:<11} {holder.pid:>7}  {holder.user:<10.10} "
-            f"{holder.started_iso:<19}  {gz:<{width}}  {holder.command}"
-        )
+    found = machine_status(config.lock_dir, config.pool, config.capacity)
+    # A planted shared queue folder: on stderr, so --json stays parseable.
+    if found.queue_problem is not None:
+        click.echo(f"ros-isolated-test: note: {found.queue_problem}", err=True)
+    click.echo(status_table.as_json(found) if as_json else status_table.table(found))
 
 
 @cli.command()
@@ -561,15 +457,15 @@ def normalise(source: Path, output: Path | None, package_name: str, test_name: s
     through it. Exits 1 when the result reports failures or errors, like `report`.
     """
     from ros_isolated_test import atomic_file
-    from ros_isolated_test.xunit import result_file
+    from ros_isolated_test.xunit import canonical
 
     # /dev/null keeps nothing; any other device node, FIFO or socket is never replaced.
     discard = output is not None and atomic_file.discards(output)
     kind = None if output is None or discard else atomic_file.special_kind(output)
     if kind is not None:
         _normalise_error(f"cannot use -o {output}: it is {kind}; {atomic_file.SPECIAL_FIX}")
-    name = test_name or result_file.test_name_of(source)
-    data, failed = result_file.normalise_file(source, package_name, name)
+    name = test_name or canonical.test_name_of(source)
+    data, failed = canonical.normalise_file(source, package_name, name)
     if output is None:
         click.echo(data.decode("utf-8"), nl=False)
     elif not discard:

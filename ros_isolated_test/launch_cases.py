@@ -7,11 +7,12 @@ file, its one item is replaced by one item per ``unittest`` case of the active a
 post-shutdown tests, named as launch_testing names them (``TestWhileRunning.test_x``,
 with the parameter set of a ``launch_testing.parametrize`` run, ``test_x[a, 1]``). The
 first case of a run to execute launches it with launch_testing's own runner, once per
-parameter set; each case then reports what ``unittest`` recorded for it. A launch that
-cannot start, or stops before its tests finished, is one error; its other cases are
-skipped, none passed.
+parameter set; each case then reports what ``unittest`` recorded for it (read into
+verdicts by launch_verdicts.py). A launch that cannot start, or stops before its tests
+finished, is one error; its other cases are skipped, none passed.
 
-Everything read of launch_testing is read here, and checked when a file is collected.
+Everything read of launch_testing is read here and in launch_verdicts.py, and checked
+when a file is collected.
 Where launch_testing is not as expected, the file stays the one test launch_testing made,
 with one warning per session: the run goes on as before, never broken. Other collectors
 (launch_pytest's among them) are left alone. With pytest-xdist, a launch file's cases
@@ -26,10 +27,25 @@ import re
 import sys
 import traceback
 import unittest
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Callable, Generator
 from typing import TYPE_CHECKING, Any
 
 import pytest
+
+from ros_isolated_test.launch_verdicts import (
+    ERROR,
+    FAILED,
+    SKIPPED,
+    XFAILED,
+    XPASSED,
+    Mismatch,
+    Verdict,
+    as_one,
+    fail_result_type,
+    message,
+    read,
+    texts,
+)
 
 if TYPE_CHECKING:
     from _pytest._code.code import ExceptionInfo, TerminalRepr, TracebackStyle
@@ -39,37 +55,11 @@ PLUGIN_NAME = "ros_isolated_test.launch_cases"
 #: Packages whose pytest items are launch_testing's (launch_testing_ros subclasses them).
 _LAUNCH_PACKAGES = ("launch_testing", "launch_testing_ros")
 
-PASSED, SKIPPED, XFAILED, XPASSED, FAILED, ERROR = (
-    "passed", "skipped", "xfailed", "xpassed", "failed", "error"
-)  # fmt: skip
-#: Worse later: a case with several records (subtests) reports its worst.
-_RANK = (PASSED, SKIPPED, XFAILED, XPASSED, FAILED, ERROR)
-_HOLDER = re.compile(r"^(setUpClass|setUpModule|tearDownClass|tearDownModule) \((.+)\)$")
 _FRAME = re.compile(r'^\s*File "(.+)", line (\d+)')
 
 
 class LaunchCasesWarning(pytest.PytestWarning):
     """launch_testing is not as this module knows it: its files stay one test each."""
-
-
-class _Mismatch(Exception):
-    """What of launch_testing differs from what this module reads (for the warning)."""
-
-
-class Verdict:
-    """One case's outcome: its kind, its message and its full text (a traceback)."""
-
-    def __init__(self, kind: str, message: str = "", text: str = "") -> None:
-        self.kind = kind
-        self.message = message
-        self.text = text
-
-    def worse(self, other: Verdict) -> Verdict:
-        """The worse of the two, the texts of both kept (subtests fail one case)."""
-        first, second = (self, other) if _RANK.index(self.kind) >= _RANK.index(other.kind) else (
-            other, self)  # fmt: skip
-        text = "\n".join(part for part in (first.text, second.text) if part)
-        return Verdict(first.kind, first.message, text)
 
 
 class _Run:
@@ -126,11 +116,11 @@ class LaunchFile:
         run.verdicts, run.after, run.whole, run.carrier = None, {}, None, None
         run.reported = set()
         if self.stopped is not None and self.stopped is not run:
-            message = (
+            why = (
                 f"not launched: the launch {self.stopped.label} stopped before its tests "
                 "finished (launch_testing launches no later parameter set then)"
             )
-            run.verdicts = [Verdict(SKIPPED, message)] * run.size
+            run.verdicts = [Verdict(SKIPPED, why)] * run.size
             return
         self.stopped = None
         test_run = copy.deepcopy(self._runs[run.index])  # as launch_testing: a rerun is fresh
@@ -147,22 +137,22 @@ class LaunchFile:
             results = runner.run()
         except Exception as error:  # the file's own code failed: its description, a check
             text = "".join(traceback.format_exception(error))
-            message = f"the launch could not start: {type(error).__name__}: {error}"
-            run.whole = Verdict(ERROR, message, text)
+            why = f"the launch could not start: {type(error).__name__}: {error}"
+            run.whole = Verdict(ERROR, why, text)
             self.stopped = run
             return
         result: Any = results.get(test_run) if len(results) != 1 else next(iter(results.values()))
-        if isinstance(result, _fail_result_type()):
-            said = _texts(result.failures[:1]).strip()
+        if isinstance(result, fail_result_type()):
+            said = texts(result.failures[:1]).strip()
             run.whole = Verdict(ERROR, _STOPPED, f"{_STOPPED}\nlaunch_testing: {said}")
             self.stopped = run
             return
         try:
-            run.verdicts, run.after = _read(cases, result)
+            run.verdicts, run.after = read(cases, result)
         except Exception as error:  # as launch_testing reports it: one result for the run
-            reason = str(error) if isinstance(error, _Mismatch) else repr(error)
+            reason = str(error) if isinstance(error, Mismatch) else repr(error)
             _warn_once(self._config, self._path, reason, _ONE_PER_RUN)
-            run.whole = _as_one(result)
+            run.whole = as_one(result)
 
 
 _STOPPED = (
@@ -172,112 +162,11 @@ _STOPPED = (
 )
 
 
-def _as_one(result: Any) -> Verdict:
-    """A run's result read as launch_testing's own item reads it: passed or not."""
-    succeeded = getattr(result, "wasSuccessful", None)
-    if callable(succeeded) and succeeded():
-        return Verdict(PASSED)
-    records = [*getattr(result, "errors", []), *getattr(result, "failures", [])]
-    text = _texts(records) if records else f"launch_testing's result: {result!r}"
-    return Verdict(FAILED, "some test cases have failed", text)
-
-
 def _together(run: _Run, carrier: str) -> str:
     """Why a case of a run with one outcome for all reports nothing of its own."""
     if run.whole is not None and run.whole.kind == ERROR:
         return f"not run: its launch ({run.label}) failed, the one error is on {carrier}"
     return f"reported with {carrier}: launch_testing's result was not read case by case"
-
-
-def _texts(entries: Sequence[tuple[Any, str]]) -> str:
-    """The texts of several records (unittest's), each under its case's name when more than one."""
-    if len(entries) == 1:
-        return str(entries[0][1])
-    return "\n".join(f"{test}:\n{text}" for test, text in entries)
-
-
-def _fail_result_type() -> type[Any]:
-    """launch_testing's result for a launch that stopped early (checked at collection)."""
-    import importlib
-
-    try:
-        found = getattr(importlib.import_module("launch_testing.test_result"), "FailResult", None)
-    except ImportError:
-        found = None
-    if not isinstance(found, type):
-        raise _Mismatch("launch_testing.test_result.FailResult is missing")
-    return found
-
-
-def _read(
-    cases: Sequence[unittest.TestCase], result: Any
-) -> tuple[list[Verdict], dict[int, list[str]]]:
-    """What ``unittest`` recorded for each of a run's ``cases``, by their position."""
-    missing = [name for name in ("testCases", "errors", "failures", "skipped")
-               if not hasattr(result, name)]  # fmt: skip
-    if missing:
-        raise _Mismatch(f"its test result has no {', '.join(missing)}")
-    where = {id(case): i for i, case in enumerate(cases)}
-    ran = {where[id(case)] for case in result.testCases if id(case) in where}
-    found: dict[int, Verdict] = {}
-    loose: list[tuple[str, str, str]] = []  # (kind, description, text): setUpClass, ...
-
-    def record(test: object, verdict: Verdict) -> None:
-        index = where.get(id(test), where.get(id(getattr(test, "test_case", None))))
-        if index is None:
-            loose.append((verdict.kind, str(test), verdict.text))
-        else:
-            found[index] = found[index].worse(verdict) if index in found else verdict
-
-    for kind, entries in ((ERROR, result.errors), (FAILED, result.failures)):
-        for test, text in entries:
-            record(test, Verdict(kind, _message(text), text))
-    for test, reason in result.skipped:
-        record(test, Verdict(SKIPPED, reason))
-    for test, text in getattr(result, "expectedFailures", []):
-        record(test, Verdict(XFAILED, _message(text) or "expected failure", text))
-    for test in getattr(result, "unexpectedSuccesses", []):
-        record(test, Verdict(XPASSED, "unexpected success: marked expectedFailure, it passed"))
-    after: dict[int, list[str]] = {}
-    for kind, description, text in loose:
-        owned = _owned(cases, description)
-        not_run = [i for i in owned if i not in ran and i not in found]
-        for i in not_run:
-            found[i] = Verdict(kind, f"{description}: {_message(text) or text}", text)
-        if not not_run and kind == ERROR and owned:
-            after.setdefault(owned[-1], []).append(f"{description}:\n{text}")
-    verdicts = []
-    for i in range(len(cases)):
-        if i in found:
-            verdicts.append(found[i])
-        elif i in ran:
-            verdicts.append(Verdict(PASSED))
-        else:
-            verdicts.append(Verdict(ERROR, "launch_testing recorded no result for this case"))
-    return verdicts, after
-
-
-def _owned(cases: Sequence[unittest.TestCase], description: str) -> list[int]:
-    """The cases a class or module fixture's record is about (all of them when unsure)."""
-    match = _HOLDER.match(description)
-    if match is not None:
-        scope = match.group(2)
-        owned = [i for i, case in enumerate(cases) if case.id().startswith(f"{scope}.")]
-        if owned:
-            return owned
-    return list(range(len(cases)))
-
-
-def _message(text: str) -> str:
-    """The exception a formatted traceback ends with (all of ``text`` if it is none)."""
-    lines = text.rstrip().splitlines()
-    starts = [i for i, line in enumerate(lines) if line.startswith("Traceback (")]
-    if not starts:
-        return text.strip()
-    rest = lines[starts[-1] + 1 :]
-    while rest and rest[0].startswith(" "):
-        rest = rest[1:]
-    return "\n".join(rest).strip() or text.strip()
 
 
 def _crash_site(text: str, path: str, lineno: int) -> tuple[str, int]:
@@ -328,7 +217,7 @@ class LaunchCase(pytest.Item):
         after, self._after = self._after, []
         if after:
             text = "\n".join(after)
-            raise _Reported(Verdict(ERROR, _message(text), text))
+            raise _Reported(Verdict(ERROR, message(text), text))
 
     def repr_failure(
         self, excinfo: ExceptionInfo[BaseException], style: TracebackStyle | None = None
@@ -352,7 +241,7 @@ class LaunchCase(pytest.Item):
         text = verdict.text or verdict.message
         path, lineno = _crash_site(text, str(self.path), self.line)
         lines = [f"{line}\n" for line in text.rstrip("\n").splitlines()]
-        crash = ReprFileLocation(path, lineno, verdict.message or _message(text))
+        crash = ReprFileLocation(path, lineno, verdict.message or message(text))
         return ExceptionChainRepr([(ReprTracebackNative(lines), crash, None)])
 
     def reportinfo(self) -> tuple[Any, int | None, str]:
@@ -361,21 +250,21 @@ class LaunchCase(pytest.Item):
 
 
 def _cases(item: pytest.Item) -> list[LaunchCase]:
-    """launch_testing's one item of a file as one item per case; _Mismatch if it cannot be."""
+    """launch_testing's one item of a file as one item per case; Mismatch if it cannot be."""
     runs = getattr(item, "test_runs", None)
     runner = getattr(item, "runner_cls", None)
     if not isinstance(runs, list) or not runs:
-        raise _Mismatch("its test item has no list of test runs (test_runs)")
+        raise Mismatch("its test item has no list of test runs (test_runs)")
     if not callable(runner):
-        raise _Mismatch("its test item has no runner class (runner_cls)")
+        raise Mismatch("its test item has no runner class (runner_cls)")
     try:
         inspect.signature(runner).bind(test_runs=[], launch_file_arguments=[], debug=0)
     except (TypeError, ValueError) as error:
-        raise _Mismatch(f"its runner takes other arguments ({error})") from None
+        raise Mismatch(f"its runner takes other arguments ({error})") from None
     for name in ("validate", "run"):
         if not callable(getattr(runner, name, None)):
-            raise _Mismatch(f"its runner has no {name}()")
-    _fail_result_type()
+            raise Mismatch(f"its runner has no {name}()")
+    fail_result_type()
     cases = [_run_cases(run) for run in runs]
     launch = LaunchFile(item, runs, [len(of_run) for of_run in cases], runner)
     parent = item.parent
@@ -390,17 +279,17 @@ def _cases(item: pytest.Item) -> list[LaunchCase]:
     names = [case.name for case in made]
     twice = sorted({name for name in names if names.count(name) > 1})
     if twice:
-        raise _Mismatch(f"two cases are named {twice[0]}")
+        raise Mismatch(f"two cases are named {twice[0]}")
     return made
 
 
 def _run_cases(run: Any) -> list[unittest.TestCase]:
     all_cases = getattr(run, "all_cases", None)
     if not callable(all_cases):
-        raise _Mismatch("its test runs have no all_cases()")
+        raise Mismatch("its test runs have no all_cases()")
     cases = list(all_cases())
     if not all(isinstance(case, unittest.TestCase) for case in cases):
-        raise _Mismatch("its test runs hold other things than unittest cases")
+        raise Mismatch("its test runs hold other things than unittest cases")
     return cases
 
 
@@ -435,16 +324,16 @@ def _warn_once(config: pytest.Config, where: object, reason: str, instead: str) 
     if config.stash.get(_WARNED, False):
         return
     config.stash[_WARNED] = True
-    message = (
+    warning = (
         f"ros-isolated-test: {_launch_testing_version()} is not as expected ({reason}): "
         f"{instead}, as launch_testing reports them"
     )
     import warnings
 
     try:
-        warnings.warn_explicit(LaunchCasesWarning(message), None, str(where), 0)
+        warnings.warn_explicit(LaunchCasesWarning(warning), None, str(where), 0)
     except Exception:  # -W error, or anything else: said all the same, the run goes on
-        print(message, file=sys.stderr, flush=True)
+        print(warning, file=sys.stderr, flush=True)
 
 
 def _launch_testing_version() -> str:
@@ -468,7 +357,7 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Generator[None, A
         if isinstance(node, pytest.Item) and _from_launch_testing(node):
             try:
                 result.extend(_cases(node) or [node])
-            except _Mismatch as mismatch:
+            except Mismatch as mismatch:
                 _warn_once(node.config, node.path, str(mismatch), _ONE_PER_FILE)
                 result.append(node)
             except Exception as error:  # whatever else it is: never break collection

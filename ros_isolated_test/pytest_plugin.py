@@ -10,9 +10,10 @@ a preset ID, DISABLE_ROS_ISOLATION and the pool mean here what they mean there.
 Machine resources (``--ros-isolated-test-resources``, ini ``ros_isolated_test_resources``)
 are held with the ID by the same reservation, for the whole session (each xdist worker).
 
-Loaded by every pytest run in the environment, so it imports nothing of its own until it
-knows it is active: inside a ROS package (a package.xml at or above the rootdir or the
-test paths), or asked for with ``--ros-isolation`` or the ``ros_isolation`` ini option.
+Loaded by every pytest run in the environment, so it imports nothing of its own but its
+options (plugin_options.py, light) until it knows it is active: inside a ROS package (a
+package.xml at or above the rootdir or the test paths), or asked for with
+``--ros-isolation`` or the ``ros_isolation`` ini option.
 Where launch_testing's own plugin is loaded, its launch files are reported case by case
 (launch_cases.py, whatever isolation decides; ``-p no:ros_isolated_test`` turns it off).
 """
@@ -23,7 +24,6 @@ import contextlib
 import os
 import sys
 from collections.abc import Generator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -31,17 +31,11 @@ import pytest
 TYPE_CHECKING = False  # nothing of the runner is imported until the plugin is active
 if TYPE_CHECKING:
     from ros_isolated_test.runner.environment import Policy
-    from ros_isolated_test.runner.session import Held
+    from ros_isolated_test.runner.isolation import Held
     from ros_isolated_test.runner.settings import Settings
 
-INI = "ros_isolation"
-#: The session's request of machine resources: the ini option and its command-line twin.
-RESOURCES_INI = "ros_isolated_test_resources"
-RESOURCES_OPTION = "--ros-isolated-test-resources"
 #: Where a worker tells the xdist controller it got no ID (the controller exits with it).
 _ERROR_KEY = "ros_isolation_error"
-#: Options that run no test (as --help): nothing is reserved for them.
-_NO_TEST_OPTIONS = ("help", "markers", "showfixtures", "show_fixtures_per_test", "collectonly")
 
 
 class _State:
@@ -69,81 +63,10 @@ _STATE = pytest.StashKey[_State]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    group = parser.getgroup("ros_isolated_test", "ROS isolation (ros-isolated-test)")
-    group.addoption(
-        "--ros-isolation",
-        action="store_const",
-        const=True,
-        dest="ros_isolation",
-        default=None,
-        help="reserve a ROS_DOMAIN_ID of its own for this session (each xdist worker), "
-        "also outside a ROS package; a preset ROS_DOMAIN_ID is then refused",
-    )
-    group.addoption(
-        "--no-ros-isolation",
-        action="store_const",
-        const=False,
-        dest="ros_isolation",
-        help="never reserve a ROS_DOMAIN_ID (as -p no:ros_isolated_test)",
-    )
-    parser.addini(
-        INI,
-        "ROS isolation: auto (default: on inside a ROS package), true, or false",
-        default="auto",
-    )
-    resources_help = (
-        "machine resources the session holds with its ROS_DOMAIN_ID until pytest ends, "
-        "waiting until every runner on the machine has left enough free, e.g. "
-        "cpu=2,mem=4G,gpu=1 (capacity: ROS_ISOLATED_TEST_CAPACITY); a request turns "
-        "isolation on outside a ROS package too, as --ros-isolation does. With "
-        "pytest-xdist each worker holds them (-n 4 with gpu=1 holds 4 GPUs), the "
-        "controller nothing"
-    )
-    group.addoption(
-        RESOURCES_OPTION,
-        dest="ros_isolated_test_resources",
-        metavar="SPEC",
-        default=None,
-        help=f"{resources_help}; wins over the ini option {RESOURCES_INI}",
-    )
-    parser.addini(RESOURCES_INI, f"{resources_help}; {RESOURCES_OPTION} wins", default="")
+    """The plugin's options and ini options (plugin_options.py)."""
+    from ros_isolated_test import plugin_options
 
-
-def _requested(config: pytest.Config) -> bool | None:
-    """True/False when asked for explicitly (option first, then ini); None: automatic."""
-    option: bool | None = config.getoption("ros_isolation")
-    if option is not None:
-        return option
-    from ros_isolated_test.switches import NotOnOff, on_off  # imports nothing more
-
-    word = str(config.getini(INI)).strip().lower()
-    try:
-        return None if word == "auto" else on_off(word, unset=None)
-    except NotOnOff:
-        raise pytest.UsageError(f"ini option {INI}={word!r}: use auto, true or false") from None
-
-
-def _resources(config: pytest.Config) -> tuple[str, str]:
-    """The session's request ("": none) and where it was given, which its error names."""
-    option: str | None = config.getoption("ros_isolated_test_resources")
-    if option is not None:
-        return option, RESOURCES_OPTION
-    return str(config.getini(RESOURCES_INI)), f"ini option {RESOURCES_INI}"
-
-
-def _in_ros_package(config: pytest.Config) -> bool:
-    """A package.xml at or above the rootdir or a path on the command line: colcon's case."""
-    starts = [config.rootpath, *(Path(arg.split("::")[0]) for arg in config.args)]
-    seen: set[Path] = set()
-    for start in starts:
-        folder = start.absolute()
-        for candidate in (folder, *folder.parents):
-            if candidate in seen:
-                break
-            seen.add(candidate)
-            if (candidate / "package.xml").is_file():
-                return True
-    return False
+    plugin_options.add(parser)
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -154,33 +77,31 @@ def pytest_configure(config: pytest.Config) -> None:
 
         if not config.pluginmanager.has_plugin(launch_cases.PLUGIN_NAME):
             config.pluginmanager.register(launch_cases, launch_cases.PLUGIN_NAME)
-    if any(getattr(config.option, name, False) for name in _NO_TEST_OPTIONS):
-        return  # --help, --markers, --fixtures, --collect-only: no test runs
-    requested = _requested(config)
-    if requested is None and not _in_ros_package(config):
-        if not _resources(config)[0].strip():
-            return
-        requested = True  # resources asked for: held as with --ros-isolation
-    if requested is False:
+    from ros_isolated_test import plugin_options
+
+    explicit = plugin_options.decide(config)
+    if explicit is None:
         return
     state = _State()
     config.stash[_STATE] = state
     controller = not hasattr(config, "workerinput") and getattr(config.option, "dist", "no") != "no"
-    _isolate(config, state, explicit=requested is True, controller=controller)
+    _isolate(config, state, explicit=explicit, controller=controller)
 
 
 def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: bool) -> None:
     """The runner's decision, then (but in the xdist controller, which runs no test) its ID."""
-    from ros_isolated_test.domain_coordinator.holdings import CapacityConflictError
+    from ros_isolated_test import plugin_options
     from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
-    from ros_isolated_test.domain_coordinator.reservation import PoolExhaustedError
+    from ros_isolated_test.domain_coordinator.resource_holds import CapacityConflictError
+    from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
     from ros_isolated_test.process.namespace import NamespaceError
     from ros_isolated_test.process.supervisor import KILL_GRACE
-    from ros_isolated_test.runner import environment, exit_codes, session, settings
+    from ros_isolated_test.runner import environment, exit_codes, settings, summary
     from ros_isolated_test.runner.discovery import DiscoveryError
+    from ros_isolated_test.runner.isolation import isolation
 
     environ = os.environ
-    asked, asked_by = _resources(config)
+    asked, asked_by = plugin_options.resources(config)
     if environment.held_for_us(environ):
         _under_the_runner(state, environ.get(environment.DOMAIN_VAR), asked, asked_by)
         return
@@ -202,7 +123,7 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
     except (settings.SettingsError, DiscoveryError) as error:
         raise pytest.UsageError(f"ros-isolated-test: {error}") from None
     if not policy.isolate and not config_settings.resources:
-        lines, properties = session.summary(policy, None)
+        lines, properties = summary.summary(policy, None)
         state.header.extend(f"ros-isolated-test: {line}" for line in lines)
         state.properties.extend(properties.items())
         return
@@ -215,7 +136,7 @@ def _isolate(config: pytest.Config, state: _State, explicit: bool, controller: b
     command = ("pytest", *config.invocation_params.args)
     try:
         held = state.stack.enter_context(
-            session.isolation(policy, config_settings, command, _note, KILL_GRACE)
+            isolation(policy, config_settings, command, _note, KILL_GRACE)
         )
     except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
         state.error = f"ros-isolated-test: error: {error}"
@@ -243,10 +164,10 @@ def _under_the_runner(state: _State, domain: str | None, asked: str, asked_by: s
 def _for_each_worker(state: _State, policy: Policy, config_settings: Settings) -> None:
     """The xdist controller's header: what each worker will hold (it holds nothing itself)."""
     from ros_isolated_test.domain_coordinator.resources import describe
-    from ros_isolated_test.runner import session
+    from ros_isolated_test.runner import summary
 
     if not policy.isolate:
-        lines, _properties = session.summary(policy, None)
+        lines, _properties = summary.summary(policy, None)
         state.header.extend(f"ros-isolated-test: {line}" for line in lines)
     each = ["a ROS_DOMAIN_ID"] if policy.isolate else []
     if config_settings.resources:
@@ -262,21 +183,21 @@ def _holding(
     config: pytest.Config, state: _State, policy: Policy, config_settings: Settings, held: Held
 ) -> None:
     """Into os.environ, pytest's header and --junit-xml: the ID and resources now held."""
-    from ros_isolated_test.runner import session
+    from ros_isolated_test.runner import summary
 
     if held.domain_id is None:  # DISABLE_ROS_ISOLATION: the resources alone
-        lines, properties = session.summary(policy, None)
+        lines, properties = summary.summary(policy, None)
     else:
         # Restored first on the way out (LIFO): before the sweep and the release.
         state.stack.callback(_set_environ, dict(os.environ))
         _set_environ(policy.for_domain(held.domain_id))
-        lines, properties = session.summary(policy, held.domain_id, config_settings, held.reserved)
+        lines, properties = summary.summary(policy, held.domain_id, config_settings, held.reserved)
         if policy.discovery is not None:  # its first line: the range, said beside the ID
             lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
         else:
             lines.insert(0, f"ROS_DOMAIN_ID {held.domain_id}")
     if held.resources:  # said right after the ID, as the runner says it
-        line, more = session.resources_summary(held, config_settings)
+        line, more = summary.resources_summary(held, config_settings)
         lines.insert(1, line)
         properties.update(more)
     state.header.extend(f"ros-isolated-test: {line}" for line in lines)
@@ -311,7 +232,7 @@ def _interruptible(state: _State, once: bool = False) -> None:
     (from the process group and passed on): with ``once`` only the first interrupts.
     Outside the main thread (an embedding program) its own handlers stay.
     """
-    from ros_isolated_test.process import supervisor
+    from ros_isolated_test.process import signals
 
     def stop(signum: int, _frame: object) -> None:
         passed_on = _pass_on(state, signum)
@@ -326,8 +247,8 @@ def _interruptible(state: _State, once: bool = False) -> None:
             state.interrupted = True
             raise KeyboardInterrupt(f"signal {signum}")
 
-    previous = supervisor.set_handlers(stop)
-    state.stack.callback(supervisor.restore_handlers, previous)
+    previous = signals.set_handlers(stop)
+    state.stack.callback(signals.restore_handlers, previous)
 
 
 def _pass_on(state: _State, signum: int) -> bool:

@@ -19,6 +19,7 @@ __all__ = [
     "bounded",
     "cut_mark",
     "display_text",
+    "json_string",
     "shown",
     "shown_code",
 ]
@@ -28,6 +29,10 @@ _BYTE_FIRST, _BYTE_LAST = "\udc80", "\udcff"
 _SURROGATE_FIRST, _SURROGATE_LAST = "\ud800", "\udfff"
 #: Where a text was cut: ``{cut}`` is the count of characters left out.
 CUT_MARK = "\n[... {cut} characters cut ...]\n"
+#: JSON string escapes: quote, backslash and every control character.
+_JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
+    code: f"\\u{code:04x}" for code in range(0x20)
+}
 #: Longest text :func:`display_text` shows by default (a holder record's command).
 DISPLAY_LIMIT = 2000
 
@@ -77,6 +82,21 @@ def display_text(text: str, limit: int = DISPLAY_LIMIT) -> str:
     if text.isprintable():
         return text
     return "".join(char if char.isprintable() else shown_code(ord(char)) for char in shown(text))
+
+
+def json_string(text: str) -> str:
+    r"""``text`` as a JSON string literal; lone surrogates (undecodable bytes) as ``\uXXXX``.
+
+    For the records runners write on a test's path, where ``json`` is not imported.
+    """
+    escaped = text.translate(_JSON_ESCAPES)
+    try:
+        escaped.encode("utf-8")
+    except UnicodeEncodeError:
+        escaped = "".join(
+            f"\\u{ord(char):04x}" if 0xD800 <= ord(char) <= 0xDFFF else char for char in escaped
+        )
+    return f'"{escaped}"'
 
 
 def cut_mark(cut: int, mark: str = CUT_MARK) -> str:

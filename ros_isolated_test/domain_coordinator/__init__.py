@@ -20,13 +20,10 @@ if TYPE_CHECKING:
         lock_dir_from_env,
     )
     from ros_isolated_test.domain_coordinator.pool import POOL_ENV, PoolSpecError, parse_pool
-    from ros_isolated_test.domain_coordinator.reservation import (
-        DomainCoordinator,
-        PoolExhaustedError,
-        Reservation,
-    )
+    from ros_isolated_test.domain_coordinator.reservation import DomainCoordinator, Reservation
     from ros_isolated_test.domain_coordinator.squatters import Squatter
-    from ros_isolated_test.domain_coordinator.status import HeldDomain, held_domains
+    from ros_isolated_test.domain_coordinator.status import DomainUse, domain_uses
+    from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
 
 _MODULE_OF = {
     "LOCK_DIR_ENV": "lock_dir",
@@ -37,25 +34,25 @@ _MODULE_OF = {
     "PoolSpecError": "pool",
     "parse_pool": "pool",
     "DomainCoordinator": "reservation",
-    "PoolExhaustedError": "reservation",
+    "PoolExhaustedError": "waiting",
     "Reservation": "reservation",
     "Squatter": "squatters",
-    "HeldDomain": "status",
-    "held_domains": "status",
+    "DomainUse": "status",
+    "domain_uses": "status",
 }
 
 __all__ = [
     "LOCK_DIR_ENV",
     "POOL_ENV",
     "DomainCoordinator",
-    "HeldDomain",
+    "DomainUse",
     "LockDirError",
     "PoolExhaustedError",
     "PoolSpecError",
     "Reservation",
     "Squatter",
+    "domain_uses",
     "ensure_lock_dir",
-    "held_domains",
     "lock_dir_from_env",
     "parse_pool",
 ]

@@ -15,7 +15,8 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
-from ros_isolated_test.domain_coordinator import holder
+from ros_isolated_test.domain_coordinator import records
+from ros_isolated_test.domain_coordinator.lock_dir import owned_file, read_small_file
 from ros_isolated_test.process import proc
 
 
@@ -73,11 +74,11 @@ def blocking_survivors(lock_dir: Path, domain_id: int, clean: bool = False) -> l
             continue
         found = [stat for pid, start in named if (stat := proc.living(pid, start)) is not None]
         alive += found
-        if found or not clean or not holder.owned_file(path):
+        if found or not clean or not owned_file(path):
             records_left = True
         else:
-            holder.remove_record(path)
-    if clean and not records_left and holder.owned_file(marker):
+            records.remove_record(path)
+    if clean and not records_left and owned_file(marker):
         with contextlib.suppress(OSError):
             marker.unlink()
     return alive
@@ -99,7 +100,7 @@ def _read_block(path: Path) -> list[tuple[int, int]] | None:
     A record of another boot names nobody (all its processes are gone).
     """
     try:
-        lines = holder.read_small_file(path).splitlines()
+        lines = read_small_file(path).splitlines()
     except (OSError, ValueError):
         return None
     if len(lines) < 3 or lines[0] != _BLOCK_HEADER:

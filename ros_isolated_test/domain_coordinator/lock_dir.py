@@ -1,4 +1,7 @@
-"""The machine-wide lock directory that every runner, user and container shares."""
+"""The machine-wide lock directory that every runner, user and container shares.
+
+Also the safe ways to open, read and own a file in it: anyone may plant anything there.
+"""
 
 from __future__ import annotations
 
@@ -148,3 +151,23 @@ def open_lock_file(path: Path) -> int:
         os.close(fd)
         raise UnusableLockFile(f"{path} is not a regular file")
     return fd
+
+
+def owned_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file of ours (not a link, not someone else's)."""
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISREG(info.st_mode) and info.st_uid == os.getuid()
+
+
+def read_small_file(path: Path, limit: int = 64 * 1024) -> str:
+    """A small regular file's text; never follows a link, never blocks on a FIFO."""
+    fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path} is not a regular file")
+        return os.read(fd, limit).decode("utf-8")
+    finally:
+        os.close(fd)

@@ -15,7 +15,7 @@ others may not write or may empty): a runner then queues in a folder of its own 
 runner reads every such folder, so arrival order holds across all of them.
 
 The same folders, under another name, hold what runners hold of machine resources
-(``holdings``): a hold is a ticket kept for the test's whole life.
+(``resource_holds``): a hold is a ticket kept for the test's whole life.
 """
 
 from __future__ import annotations
@@ -30,23 +30,25 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from ros_isolated_test.domain_coordinator.flock import try_lock, wait_lock
-from ros_isolated_test.domain_coordinator.holder import (
+from ros_isolated_test.domain_coordinator.lock_dir import (
+    LockDirError,
+    ensure_lock_dir,
+    owned_file,
+    read_small_file,
+)
+from ros_isolated_test.domain_coordinator.records import (
     LATEST_TIME,
     LONG_TEXT,
     SHORT_TEXT,
     iso_time,
-    json_string,
-    owned_file,
     parse_record,
-    read_small_file,
     record_pid,
     record_text,
     record_time,
     user_name,
 )
-from ros_isolated_test.domain_coordinator.lock_dir import LockDirError, ensure_lock_dir
 from ros_isolated_test.process import proc
-from ros_isolated_test.text import display_text
+from ros_isolated_test.text import display_text, json_string
 
 QUEUE_DIR = "queue"
 _TICKET = ".ticket"

@@ -14,8 +14,9 @@ survivors stays taken while they live (see ``block``), as does one a DDS partici
 is bound to (``participants``) or, after a holder died holding it, one a process
 still carries in ROS_DOMAIN_ID (``escaped``).
 
-A runner that asks for machine resources (``holdings``) takes them together with its
-ID, all or nothing, and gives both back together.
+A runner that asks for machine resources (``resource_holds``) takes them together with its
+ID, all or nothing, and gives both back together. Waiting for them in line, first come,
+first served, is ``waiting``'s policy: this module only takes and gives back.
 """
 
 from __future__ import annotations
@@ -23,11 +24,10 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
-import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, holdings, participants, port_guard
+from ros_isolated_test.domain_coordinator import participants, port_guard, records, resource_holds
 from ros_isolated_test.domain_coordinator.block import blocking_survivors, write_block
 from ros_isolated_test.domain_coordinator.escaped import escaped_processes
 from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
@@ -40,21 +40,10 @@ from ros_isolated_test.domain_coordinator.lock_dir import (
 )
 from ros_isolated_test.domain_coordinator.lock_files import lock_path, own_lock_path
 from ros_isolated_test.domain_coordinator.pool import pool_from_env
-from ros_isolated_test.domain_coordinator.queue import RESOURCE_MARK, Queue, Ticket
+from ros_isolated_test.domain_coordinator.queue import Queue, Ticket
 from ros_isolated_test.domain_coordinator.resources import describe
+from ros_isolated_test.domain_coordinator.waiting import Waiting
 from ros_isolated_test.process import proc
-
-#: How often a waiting runner first in line tries for an ID, and how often the others look.
-HEAD_POLL_SECONDS = 0.05
-QUEUE_POLL_SECONDS = 0.1
-
-
-class PoolExhaustedError(RuntimeError):
-    """No ID became free in time; the message says who holds them and what to do."""
-
-
-class ResourcesBusyError(PoolExhaustedError):
-    """The resources asked for did not come free in time (exit code as for no ID)."""
 
 
 def release_stamp(lock_dir: Path, domain_id: int) -> Path:
@@ -101,7 +90,7 @@ class Reservation:
         #: Set when survivors could not be recorded: the release then says nothing is left
         #: of the test only if that is true (see :meth:`release`).
         self.unclean = False
-        #: The hold of the resources taken with the ID (``holdings``), given back with it.
+        #: The hold of the resources taken with the ID (``resource_holds``), given back with it.
         self.holding: Ticket | None = None
         #: Seconds spent waiting for the ID (and the resources) before it was held; of
         #: those, the ones when the resources asked for were short (the rest: no ID free,
@@ -117,14 +106,14 @@ class Reservation:
 
         For survivors of the test: processes the runner could not end. Call it before
         :meth:`release`, while no other runner can take the ID. The resources held with
-        the ID stay held as long (``holdings.keep_for``). Raises OSError when the block
+        the ID stay held as long (``resource_holds.keep_for``). Raises OSError when the block
         cannot be recorded.
         """
         processes = list(processes)
         try:
             path = write_block(self.lock_dir, self.domain_id, processes)
             if self.holding is not None:
-                holdings.keep_for(self.holding, processes)
+                resource_holds.keep_for(self.holding, processes)
         except OSError:
             self.unclean = True
             raise
@@ -142,12 +131,12 @@ class Reservation:
             return
         self.released = True
         if self.unclean:
-            if self.record is None or not holder.refresh(self.record):
-                holder.mark_held(self.lock_dir, self.domain_id)
+            if self.record is None or not records.refresh(self.record):
+                records.mark_held(self.lock_dir, self.domain_id)
             self._let_go()
             return
         if self.record is not None:
-            holder.remove_record(self.record)
+            records.remove_record(self.record)
         with contextlib.suppress(OSError):
             stamp = release_stamp(self.lock_dir, self.domain_id)
             flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
@@ -181,7 +170,7 @@ class ResourceHold:
 
     def block_for(self, processes: Iterable[proc.Stat]) -> Path:
         """Keep the resources held while any of ``processes`` lives (see Reservation's)."""
-        return holdings.keep_for(self.holding, processes)
+        return resource_holds.keep_for(self.holding, processes)
 
     def release(self) -> None:
         if not self.released:
@@ -260,12 +249,10 @@ class DomainCoordinator:
     ) -> None:
         self.lock_dir = lock_dir if lock_dir is not None else lock_dir_from_env()
         self.pool = tuple(pool) if pool is not None else pool_from_env()
-        #: What every reservation of this coordinator holds besides its ID (``holdings``).
+        #: What every reservation of this coordinator holds besides its ID (``resource_holds``).
         self.resources = dict(resources or {})
         #: The capacity of those resources (settings): every runner must be given the same.
         self.capacity = dict(capacity or {})
-        #: Why the last attempt got nothing, when resources were the reason (for messages).
-        self._short: str | None = None
 
     def candidates(self, released: dict[int, float] | None = None) -> list[int]:
         """The pool, least recently released first.
@@ -313,10 +300,12 @@ class DomainCoordinator:
                     bound = participants.bound_domains()
                 if domain_id not in bound and not escaped_processes(self.lock_dir, domain_id):
                     try:
-                        record: Path | None = holder.write_record(self.lock_dir, domain_id, command)
+                        record: Path | None = records.write_record(
+                            self.lock_dir, domain_id, command
+                        )
                     except OSError:
                         # An empty record, if even that: it still says "held" should we die.
-                        record = holder.mark_held(self.lock_dir, domain_id)
+                        record = records.mark_held(self.lock_dir, domain_id)
                     if record is None:
                         port.close()
                         if lock_fd is not None:
@@ -341,7 +330,8 @@ class DomainCoordinator:
         """
         ensure_lock_dir(self.lock_dir)
         queue = Queue(self.lock_dir)
-        if queue.waiting() and self._id_ahead(queue, None):
+        waiting = Waiting(self.lock_dir, self.pool, self.resources, self.capacity)
+        if queue.waiting() and waiting.id_ahead(queue, None):
             return None
         return self.try_reserve(command)
 
@@ -374,117 +364,46 @@ class DomainCoordinator:
         on_wait: Callable[[str], None] | None,
         domain: bool,
     ) -> Reservation | ResourceHold:
-        # Refused before anything is read or written through a planted path (the queue).
-        ensure_lock_dir(self.lock_dir)
-        queue = Queue(self.lock_dir)
-        start = time.monotonic()
-        # Not waiting at all: any free ID will do. Otherwise behind every earlier waiter
-        # (no ticket yet: behind them all), unless nobody waits.
-        before = "" if wait_timeout <= 0 or not queue.waiting() else None
-        taken, _turn = self._attempt(command, queue, before, domain)
-        if taken is not None:
-            return taken
-        if wait_timeout <= 0:
-            raise self._gave_up("", 0.0)
-        told = 0.0
-        # Of the wait, the time the resources asked for were short (a runner that has no
-        # ID waits for an ID otherwise): each pause counts as the try before it found.
-        short = 0.0
-        was_short, mark = self._short is not None, start
-        extra = ""
-        if self.resources:
-            extra = holdings.ticket_fields(self.resources, self.capacity, domain)
-        with queue.ticket(command, extra, marked=bool(self.resources)) as ticket:
-            if queue.problem is not None and on_wait is not None:
-                on_wait(queue.problem)  # once: the planted path, and what we do instead
-            while True:
-                waited = time.monotonic() - start
-                # Without a ticket (none could be made) a runner waits out of order.
-                name = ticket.name if ticket is not None else ""
-                taken, turn = self._attempt(command, queue, name, domain)
-                now = time.monotonic()
-                if was_short:
-                    short += now - mark
-                was_short, mark = self._short is not None, now
-                if taken is not None:
-                    taken.waited = now - start
-                    # Without an ID, all of the wait was for the resources.
-                    taken.waited_resources = min(short, taken.waited) if domain else taken.waited
-                    return taken
-                if waited >= wait_timeout:
-                    raise self._gave_up("waited", waited)
-                if on_wait is not None and (told == 0.0 or waited - told >= 10.0):
-                    told = waited or 0.001
-                    ahead = ticket.ahead() if ticket is not None else 0
-                    on_wait(self._waiting_message(ahead, waited, wait_timeout))
-                # A runner whose turn it is looks often (an attempt is a few lock calls);
-                # the rest only need to notice when their turn comes.
-                time.sleep(HEAD_POLL_SECONDS if turn else QUEUE_POLL_SECONDS)
+        """Take in turn (``waiting`` keeps the line), each try by :meth:`_take`."""
+        waiting = Waiting(self.lock_dir, self.pool, self.resources, self.capacity)
 
-    def _attempt(
-        self, command: Sequence[str], queue: Queue, before: str | None, domain: bool
-    ) -> tuple[Reservation | ResourceHold | None, bool]:
-        """One try, in turn: (what was taken or None, whether it was our turn to try).
+        def take(wanted: bool) -> Reservation | ResourceHold | None:
+            return self._take(command, wanted)
 
-        ``before``: our ticket's name; None for a newcomer behind every waiter; "" to
-        take whatever is free regardless of waiters.
+        taken = waiting.wait(command, wait_timeout, on_wait, domain, take)
+        assert isinstance(taken, (Reservation, ResourceHold))
+        return taken
+
+    def _take(self, command: Sequence[str], domain: bool) -> Reservation | ResourceHold | None:
+        """One try at what this coordinator holds, when the waiting says it is our turn.
+
+        Without resources: a free ID. With them (under their mutex): the ID when one is
+        asked for, then the resources, together or nothing.
         """
-        self._short = None
         if not self.resources:
-            if before != "" and self._id_ahead(queue, before):
-                return None, False
-            return self.try_reserve(command), True
-        with holdings.mutex(self.lock_dir) as held:
-            if not held:
-                return None, True  # someone is deciding: look again soon
-            board = holdings.picture(self.lock_dir, queue, self.resources, self.capacity, before)
-            mine = holdings.Demand(before or "", self.resources, domain)
-            fits, turn = board.may_go(mine, before)
-            if not fits:
-                self._short = board.shortage(self.resources)
-                return None, False
-            if not turn:
-                return None, False
-            reservation = self.try_reserve(command) if domain else None
-            if domain and reservation is None:
-                return None, True
-            holding = holdings.hold(
-                self.lock_dir,
-                command,
-                self.resources,
-                self.capacity,
-                None if reservation is None else reservation.domain_id,
+            return self.try_reserve(command)
+        reservation = self.try_reserve(command) if domain else None
+        if domain and reservation is None:
+            return None
+        holding = resource_holds.hold(
+            self.lock_dir,
+            command,
+            self.resources,
+            self.capacity,
+            None if reservation is None else reservation.domain_id,
+        )
+        if holding is None:
+            if reservation is not None:
+                reservation.release()
+            raise LockDirError(
+                f"cannot record a hold of {describe(self.resources)} in {self.lock_dir} "
+                "(a runner that dies must leave nothing held); free space there, or "
+                "point ROS_ISOLATED_TEST_LOCK_DIR elsewhere"
             )
-            if holding is None:
-                if reservation is not None:
-                    reservation.release()
-                raise LockDirError(
-                    f"cannot record a hold of {describe(self.resources)} in {self.lock_dir} "
-                    "(a runner that dies must leave nothing held); free space there, or "
-                    "point ROS_ISOLATED_TEST_LOCK_DIR elsewhere"
-                )
-            if reservation is None:
-                return ResourceHold(holding), True
-            reservation.holding = holding
-            return reservation, True
-
-    def _id_ahead(self, queue: Queue, before: str | None) -> bool:
-        """Whether an earlier waiter is to get an ID first (so an ID-only runner waits).
-
-        Tickets that ask for resources count only while what they ask for is free: a
-        waiter held up by a GPU holds up nobody who asks for an ID alone. Their records
-        are read only when such tickets exist.
-        """
-        earlier = [
-            path.name for path in queue.live_tickets() if before is None or path.name < before
-        ]
-        if not earlier:
-            return False
-        if not any(name.endswith(RESOURCE_MARK + ".ticket") for name in earlier):
-            return True
-        board = holdings.picture(self.lock_dir, queue, {}, {})
-        _fits, turn = board.may_go(holdings.Demand(before or "~", {}, True), before)
-        return not turn
+        if reservation is None:
+            return ResourceHold(holding)
+        reservation.holding = holding
+        return reservation
 
     @contextlib.contextmanager
     def reserve(
@@ -499,48 +418,3 @@ class DomainCoordinator:
             yield reservation
         finally:
             reservation.release()
-
-    def _holders(self) -> str:
-        from ros_isolated_test.domain_coordinator.status import describe_holders
-
-        return describe_holders(self.lock_dir, self.pool)
-
-    def _waiting_message(self, ahead: int, waited: float, limit: float) -> str:
-        if self._short is not None:
-            return (
-                f"waiting for {describe(self.resources)} ({waited:.1f} s of {limit:g} s, "
-                f"{ahead} runner(s) ahead): {self._short}"
-            )
-        from ros_isolated_test.domain_coordinator.status import pool_usage
-
-        held, holders = pool_usage(self.lock_dir, self.pool)
-        if held < len(self.pool):
-            # Free IDs, but an earlier waiter takes the next one first (first come, first served).
-            why = f"{len(self.pool) - held} of {len(self.pool)} IDs free, for earlier waiters first"
-        else:
-            why = f"all {len(self.pool)} IDs of the pool are in use"
-        return (
-            f"waiting for a free ROS_DOMAIN_ID ({waited:.1f} s of {limit:g} s, "
-            f"{ahead} runner(s) ahead): {why}: {holders}"
-        )
-
-    def _gave_up(self, how: str, waited: float) -> PoolExhaustedError:
-        """The error for a runner that got nothing: resources or the pool."""
-        if self._short is not None:
-            spent = f"after waiting {waited:.0f} s, " if how else ""
-            return ResourcesBusyError(
-                f"{spent}{describe(self.resources)} is not free: {self._short} (see "
-                "ros-isolated-test status); run fewer tests at once, ask for less, or wait "
-                "longer with --wait-timeout / ROS_ISOLATED_TEST_WAIT_TIMEOUT"
-            )
-        return PoolExhaustedError(self._exhausted(how, waited))
-
-    def _exhausted(self, how: str, waited: float) -> str:
-        spent = f"after waiting {waited:.0f} s, " if how else ""
-        return (
-            f"{spent}no free ROS_DOMAIN_ID: all {len(self.pool)} IDs of the pool are in use "
-            f"({self._holders()}; see ros-isolated-test status); run fewer tests at once "
-            "(ctest -j), widen the pool with "
-            "ROS_ISOLATED_TEST_DOMAINS (e.g. '1-101,215-232'), or wait longer with "
-            "--wait-timeout / ROS_ISOLATED_TEST_WAIT_TIMEOUT"
-        )

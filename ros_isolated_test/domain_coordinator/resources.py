@@ -4,7 +4,7 @@ A request (``run --resources cpu=2,mem=4G,gpu=1``, ROS_ISOLATED_TEST_RESOURCES) 
 capacity (ROS_ISOLATED_TEST_CAPACITY) share one syntax: comma-separated ``name=amount``.
 ``cpu`` counts CPUs, ``mem`` bytes (suffixes K, M, G, T: powers of 1024), any other name
 counts units of a device or licence. Capacity defaults to the CPUs this process may use,
-MemTotal and 1 of anything else (exclusive). Holding them is ``holdings``' job.
+MemTotal and 1 of anything else (exclusive). Holding them is ``resource_holds``' job.
 
 Plain code, no ``re``: the RUNNER parses a request on every test that asks for one.
 """

@@ -13,7 +13,7 @@ import os
 import re
 import time
 
-from ros_isolated_test.domain_coordinator.holder import user_name
+from ros_isolated_test.domain_coordinator.records import user_name
 from ros_isolated_test.process import proc
 
 _VARIABLE = b"ROS_DOMAIN_ID="

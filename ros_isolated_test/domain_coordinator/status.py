@@ -6,10 +6,11 @@ when a DDS participant is bound to its UDP ports, or when a live process carries
 it in ROS_DOMAIN_ID (a test that outlived its runner, a shell's export): a squatter,
 or while a block record names a live survivor of its last test (one the runner could
 not end).
-Runners waiting for an ID (their tickets in the queue) are listed apart.
+Runners waiting for an ID (their tickets in the queue) are listed apart, then the machine
+resources runners hold: :func:`machine_status` reads all of it once, for the table.
 
 Everything shown comes display-safe from here: records are validated as they are read
-(see ``holder``), and a squatter's or survivor's command line, which any process can
+(see ``records``), and a squatter's or survivor's command line, which any process can
 set, has its control characters escaped like a record's.
 """
 
@@ -21,9 +22,12 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import holder, participants, port_guard, squatters
+from ros_isolated_test.domain_coordinator import participants, port_guard, records, squatters
 from ros_isolated_test.domain_coordinator.block import blocking_survivors
 from ros_isolated_test.domain_coordinator.lock_files import probe_lock
+from ros_isolated_test.domain_coordinator.queue import Queue, Waiter
+from ros_isolated_test.domain_coordinator.resource_holds import Hold, holds
+from ros_isolated_test.domain_coordinator.resources import capacity_for
 from ros_isolated_test.process import proc
 from ros_isolated_test.text import display_text
 
@@ -31,7 +35,7 @@ _LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
 
 
 @dataclass(frozen=True)
-class HeldDomain:
+class DomainUse:
     """One ID in use, and by what.
 
     ``via`` is ``lock`` (a runner), ``port``, ``participant``, ``environment`` or
@@ -40,11 +44,11 @@ class HeldDomain:
 
     domain_id: int
     via: str
-    holder: holder.Holder | None
+    holder: records.Holder | None
     ports: tuple[int, ...] = ()
 
 
-def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
+def domain_uses(lock_dir: Path, pool: tuple[int, ...]) -> list[DomainUse]:
     """Every ID in use: locks in the directory (any pool), ports and squatters of the pool.
 
     Runners of other users may use other pools, so every lock file counts, not only
@@ -57,7 +61,7 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
             match = _LOCK_NAME.fullmatch(entry.name)
             if match:
                 candidates.add(int(match.group(1)))
-    held: list[HeldDomain] = []
+    uses: list[DomainUse] = []
     found = squatters.scan(candidates)
     bound = participants.bound_domains()
     # A survivor still carries an ID in its environment: listed once, as a survivor.
@@ -68,23 +72,23 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
     for domain_id in sorted(candidates):
         holders: set[int] = set()
         if probe_lock(lock_dir, domain_id):
-            records = holder.read_records(lock_dir, domain_id)
-            held.append(HeldDomain(domain_id, "lock", records[0] if records else None))
-            holders = {record.pid for record in records}
+            found_records = records.read_records(lock_dir, domain_id)
+            uses.append(DomainUse(domain_id, "lock", found_records[0] if found_records else None))
+            holders = {record.pid for record in found_records}
         elif port_guard.port_is_taken(domain_id):
-            held.append(HeldDomain(domain_id, "port", None))
+            uses.append(DomainUse(domain_id, "port", None))
         elif domain_id in bound:  # a holder's own test is a participant too: not listed
-            held.append(HeldDomain(domain_id, "participant", None, tuple(bound[domain_id])))
+            uses.append(DomainUse(domain_id, "participant", None, tuple(bound[domain_id])))
         for squatter in found.get(domain_id, ()):
             if squatter.pid in named:
                 continue  # a survivor, listed below
             if holders & squatters.ancestors(squatter.pid):
                 continue  # the holder's own test, not a squatter
-            held.append(
-                HeldDomain(
+            uses.append(
+                DomainUse(
                     domain_id,
                     "environment",
-                    holder.Holder(
+                    records.Holder(
                         domain_id=domain_id,
                         pid=squatter.pid,
                         user=squatter.user,
@@ -95,8 +99,8 @@ def held_domains(lock_dir: Path, pool: tuple[int, ...]) -> list[HeldDomain]:
                 )
             )
         for survivor in survivors[domain_id]:
-            held.append(HeldDomain(domain_id, "survivor", _survivor(domain_id, survivor)))
-    return held
+            uses.append(DomainUse(domain_id, "survivor", _survivor(domain_id, survivor)))
+    return uses
 
 
 def _unique(survivors: list[proc.Stat]) -> list[proc.Stat]:
@@ -104,12 +108,12 @@ def _unique(survivors: list[proc.Stat]) -> list[proc.Stat]:
     return list({stat.pid: stat for stat in survivors}.values())
 
 
-def _survivor(domain_id: int, survivor: proc.Stat) -> holder.Holder:
+def _survivor(domain_id: int, survivor: proc.Stat) -> records.Holder:
     """A survivor of the ID's last test, described like a holder."""
-    return holder.Holder(
+    return records.Holder(
         domain_id=domain_id,
         pid=survivor.pid,
-        user=holder.user_name(proc.owner_uid(survivor.pid)),
+        user=records.user_name(proc.owner_uid(survivor.pid)),
         command=display_text(proc.cmdline(survivor.pid) or f"({survivor.name})"),
         started=proc.started_at(survivor),
         host="",
@@ -125,7 +129,7 @@ def pool_usage(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> tuple[i
     """How many IDs of the pool are held, and the line of :func:`describe_holders`."""
     wanted = set(pool)
     parts: list[str] = []
-    items = [item for item in held_domains(lock_dir, pool) if item.domain_id in wanted]
+    items = [item for item in domain_uses(lock_dir, pool) if item.domain_id in wanted]
     held = len({item.domain_id for item in items})
     for item in items[:limit]:
         if item.holder is not None:
@@ -141,7 +145,7 @@ def pool_usage(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> tuple[i
     return held, "; ".join(parts) or "see ros-isolated-test status"
 
 
-def _anonymous(item: HeldDomain) -> str:
+def _anonymous(item: DomainUse) -> str:
     """What holds an ID when no process is named: a port, a participant's UDP ports."""
     if item.via == "port":
         return "port taken"
@@ -155,10 +159,48 @@ def _ports(ports: tuple[int, ...], limit: int = 4) -> str:
     return shown + (f" and {len(ports) - limit} more" if len(ports) > limit else "")
 
 
-def anonymous_holder(item: HeldDomain) -> str:
+def anonymous_holder(item: DomainUse) -> str:
     """The line ``status`` shows for an ID no holder record or process names."""
     if item.via == "lock":
         return "held (no holder record)"
     if item.via == "participant":
         return f"a DDS participant (UDP ports {_ports(item.ports)}) outside any runner"
     return "port 32768+ID taken (upstream domain_coordinator or another program)"
+
+
+@dataclass(frozen=True)
+class MachineStatus:
+    """Everything ``status`` shows, read once: IDs in use, waiters, resources held."""
+
+    lock_dir: Path
+    uses: list[DomainUse]
+    waiters: list[Waiter]
+    #: Why the shared queue folder cannot be used (planted), or None.
+    queue_problem: str | None
+    holds: list[Hold]
+    #: The capacity to show: this shell's, then what holders were given for other names.
+    capacity: dict[str, int]
+    #: Whether resources are in play (held, asked for, or a capacity set here).
+    in_play: bool
+
+
+def machine_status(
+    lock_dir: Path, pool: tuple[int, ...], configured: dict[str, int]
+) -> MachineStatus:
+    """Read what ``status`` shows; ``configured`` is the capacity this shell's settings give."""
+    uses = domain_uses(lock_dir, pool)
+    queue = Queue(lock_dir)
+    waiters = queue.waiters()
+    # A planted shared queue folder: runners still queue (per user), but whoever planted
+    # it should be found.
+    problem = queue.shared_problem()
+    held_resources = holds(lock_dir)
+    # The capacity this shell's settings give, with what runners holding something were
+    # given for names it does not set (they may have been started elsewhere).
+    capacity = capacity_for(["cpu", "mem"], configured)
+    for hold in held_resources:
+        for name, amount in hold.capacity.items():
+            capacity.setdefault(name, amount)
+    capacity.update(configured)
+    in_play = bool(held_resources or configured or any(w.resources for w in waiters))
+    return MachineStatus(lock_dir, uses, waiters, problem, held_resources, capacity, in_play)

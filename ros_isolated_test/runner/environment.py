@@ -31,7 +31,7 @@ from ros_isolated_test.runner.settings import (
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
-    from ros_isolated_test.process.namespace import Problem
+    from ros_isolated_test.process.namespace_diagnosis import Problem
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
 #: Set beside ROS_DOMAIN_ID to the same ID wherever a runner (or the pytest plugin) holds
@@ -109,12 +109,13 @@ class Policy:
         ``--isolation namespace`` probes nothing beforehand (a probe costs as much as
         the set-up itself): the test's own start is the probe, before anything of it ran.
         """
-        from ros_isolated_test.process import namespace
+        from ros_isolated_test.process.namespace import NamespaceError
+        from ros_isolated_test.process.namespace_diagnosis import explain
 
-        problem = namespace.explain(
+        problem = explain(
             error
-            if isinstance(error, namespace.NamespaceError)
-            else namespace.NamespaceError("unshare", error.errno or errno.EPERM)
+            if isinstance(error, NamespaceError)
+            else NamespaceError("unshare", error.errno or errno.EPERM)
         )
         return _refused_namespaces(self.asked, problem)
 
@@ -312,7 +313,7 @@ def _namespaces(
     ``namespace`` refuses what cannot work: a contradiction, or a host that forbids user
     namespaces. ``auto`` falls back to the domain ID instead, so it must know before the
     reservation (it waits for an ID only without namespaces): it probes, once
-    (``namespace.problem``). So does work in this very process (the pytest plugin).
+    (``namespace_diagnosis.problem``). So does work in this very process (the pytest plugin).
     ``namespace`` for a test the runner starts does not: the test's start is the probe
     (:meth:`Policy.refusal`), which saves a second set-up on every test.
     """
@@ -331,12 +332,13 @@ def _namespaces(
         return False, f"as namespaces would cut it off: {cause}"
     if mode == "namespace" and not (in_process or xdist):
         return True, None
-    from ros_isolated_test.process import namespace
+    from ros_isolated_test.process import namespace_diagnosis
+    from ros_isolated_test.process.namespace import NamespaceError
 
     problem = (
-        namespace.explain(namespace.NamespaceError("xdist", errno.EINVAL))
+        namespace_diagnosis.explain(NamespaceError("xdist", errno.EINVAL))
         if xdist
-        else namespace.problem(in_process)
+        else namespace_diagnosis.problem(in_process)
     )
     if problem is None:
         return True, None

@@ -11,7 +11,7 @@ from enum import Enum
 from pathlib import Path
 
 from ros_isolated_test.process.supervisor import KILL_GRACE
-from ros_isolated_test.xunit.result_file import test_name_of
+from ros_isolated_test.xunit.canonical import test_name_of
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:

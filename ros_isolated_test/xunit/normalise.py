@@ -17,14 +17,10 @@ import re
 from collections.abc import Iterable
 
 from ros_isolated_test.text import bounded
+from ros_isolated_test.xunit.builder import MAX_OUTCOMES
 from ros_isolated_test.xunit.gitlab import distinct_gitlab_keys, gitlab_safe_types
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome
-from ros_isolated_test.xunit.reader import (
-    MAX_OUTCOMES,
-    RawCase,
-    RawOutcome,
-    ReadResult,
-)
+from ros_isolated_test.xunit.raw import RawCase, RawOutcome, ReadResult
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token
 
 _XMLRUNNER_SUFFIX = re.compile(r"-[0-9]{14}$")

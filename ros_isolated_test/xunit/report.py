@@ -20,8 +20,8 @@ from pathlib import Path
 from ros_isolated_test.text import display_text
 from ros_isolated_test.xunit import normalise, reader
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
+from ros_isolated_test.xunit.canonical import test_name_of
 from ros_isolated_test.xunit.model import Case, Outcome
-from ros_isolated_test.xunit.result_file import test_name_of
 
 
 @dataclass

@@ -1,13 +1,17 @@
 """One test's result file through its life: stale file gone, placeholder, final word.
 
+The runner's session drives it through named steps and it never calls back: ``prepare``
+(clear what an earlier run left), ``write_placeholder`` (what a killed runner leaves),
+then the final word, ``write`` (a result of the runner's own, or the test's own file
+once ``adopt`` made it canonical). A run with reruns adds ``end_attempt`` after each
+attempt's word, ``next_attempt`` before the next one, and ``write_attempts`` for the
+file that holds them all; ``rewrite`` says the final word again with what came since.
+
 The final word is always a canonical file at the result path: the test's own file
 normalised (the original kept beside it as ``<name>.orig``, linked there before the
 canonical file replaces it in one rename, so a kill at any instant leaves a file at the
-path), or one written for a test that wrote none. When the final word cannot be written
-(a disk that filled up while the test ran), the placeholder must not stay behind saying
-the test most likely timed out: it is overwritten in place, in blocks it already holds,
-by a short result saying the write failed and how the test ended. The placeholder keeps
-room for that.
+path), or one written for a test that wrote none. When the final word cannot be written,
+the placeholder is overwritten in place by a stand-in saying so (``placeholder``).
 """
 
 from __future__ import annotations
@@ -29,76 +33,17 @@ from ros_isolated_test.atomic_file import (
     write_atomically,
 )
 from ros_isolated_test.text import shown
-from ros_isolated_test.xunit import serialise, validate
+from ros_isolated_test.xunit import placeholder, serialise, validate
+from ros_isolated_test.xunit.canonical import read_cases
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
-    from ros_isolated_test.xunit import reader
-
 NO_RESULT = "The test did not generate a result file."
 ORIGINAL_SUFFIX = ".orig"
-#: How the stand-in for a result that could not be written begins.
-NOT_WRITTEN = "ros-isolated-test could not write this result file"
-#: Bytes the placeholder holds beyond its own content, so the stand-in always fits.
-RESERVE_BYTES = 1024
-#: Properties the stand-in keeps while they fit: how the test ended, and on which ID.
-_STAND_IN_PROPERTIES = ("exit", "exit_code", "signal", "duration", "ros_domain_id")
 _SPACE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
-#: Suite properties the report's timeline draws from (one set per attempt; a rerun's
-#: earlier ones as ``attempt_<k>.<name>``): when the command started and ended (local
-#: ISO 8601 to the microsecond, with the zone), the seconds waited before it for an ID
-#: and for the resources asked for, and the pool the ID came from.
-STARTED_AT = "started_at"
-ENDED_AT = "ended_at"
-WAIT_DOMAIN = "wait_domain_seconds"
-WAIT_RESOURCES = "wait_resources_seconds"
-DOMAIN_POOL = "domain_pool"
-
-
-def test_name_of(result_file: Path) -> str:
-    """The test a result file belongs to: its name without the producer's suffix."""
-    name = result_file.name
-    for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
-        if name.endswith(suffix) and len(name) > len(suffix):
-            return name[: -len(suffix)]
-    return name
-
-
-def instant(when: float) -> str:
-    """``when`` as local ISO 8601 to the microsecond, with its zone: ordered across hosts.
-
-    The suite's ``timestamp`` keeps the second and no zone, as the strictest readers
-    want; a timeline of short tests, gathered from several machines, needs both.
-    """
-    local = time.localtime(when)
-    minutes = local.tm_gmtoff // 60
-    sign = "-" if minutes < 0 else "+"
-    hours, minutes = divmod(abs(minutes), 60)
-    micro = min(int(when % 1 * 1_000_000), 999_999)
-    day = time.strftime("%Y-%m-%dT%H:%M:%S", local)
-    return f"{day}.{micro:06d}{sign}{hours:02d}:{minutes:02d}"
-
-
-def timeline_properties(
-    started: float, ended: float, waited: float, waited_resources: float, pool: str
-) -> dict[str, str]:
-    """The properties of one attempt for the timeline (see :data:`STARTED_AT`).
-
-    ``pool`` is the pool the ID came from as ID ranges (``102-110, 150``), empty when
-    the test held no ID.
-    """
-    found = {
-        STARTED_AT: instant(started),
-        ENDED_AT: instant(ended),
-        WAIT_DOMAIN: f"{max(waited - waited_resources, 0.0):.3f}",
-        WAIT_RESOURCES: f"{waited_resources:.3f}",
-    }
-    if pool:
-        found[DOMAIN_POOL] = pool
-    return found
 
 
 class ResultFile:
@@ -126,11 +71,14 @@ class ResultFile:
         #: The suite of that final word: one attempt's result, when a test runs again.
         self.last_suite: Suite | None = None
         # How that final word is built from the properties, whether it is checked, and
-        # the merge it was written through, to write it again.
+        # the earlier attempts it was written beside, to write it again.
         self._last: _Word | None = None
-        # From a rerun on (next_attempt): what puts the earlier attempts beside this one's
-        # suite, so the file on disk never shows an attempt without the failures before it.
-        self._merge: Callable[[Suite], Suite] | None = None
+        # A rerun series (from next_attempt on): the suites of the attempts whose final
+        # word was written, put beside each later word so the file on disk never shows
+        # an attempt without the failures before it; the last one kept (end_attempt).
+        self._series = False
+        self._attempts: list[Suite] = []
+        self._kept_last: Suite | None = None
         # Whether adopt() kept the test's own file aside at ``original``; whether it took
         # it from ``own`` (the result path then holds our placeholder, not the test's file);
         # the node kept there, the one special file (a FIFO the test left) a write may replace.
@@ -146,6 +94,11 @@ class ResultFile:
     def original(self) -> Path | None:
         """Where the test's own file is kept once its canonical form replaces it."""
         return None if self.path is None else self.path.with_name(self.path.name + ORIGINAL_SUFFIX)
+
+    @property
+    def attempts_written(self) -> int:
+        """How many attempts of a rerun series have a final word kept (``end_attempt``)."""
+        return len(self._attempts)
 
     def prepare(self) -> None:
         """Drop stale files of an earlier run (colcon never clears them), make the folder.
@@ -204,19 +157,28 @@ class ResultFile:
         self.own = own
         return own
 
-    def next_attempt(
-        self, finished: int, properties: dict[str, str], merge: Callable[[Suite], Suite]
-    ) -> bool:
+    def end_attempt(self) -> None:
+        """The attempt's final word, if it was written, joins those the series merges."""
+        from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY
+
+        self._kept_last, self.last_suite = self.last_suite, None
+        if self._kept_last is not None:
+            # The merge counts the attempts itself; attempt 1's own count would be kept
+            # as a difference (attempt_1.attempts).
+            self._kept_last.properties.pop(ATTEMPTS_PROPERTY, None)
+            self._attempts.append(self._kept_last)
+
+    def next_attempt(self, finished: int, properties: dict[str, str]) -> bool:
         """Make ready for the test to run again after attempt ``finished``.
 
         The properties start again from ``properties``; the test's own file of the
         attempt (``.orig``) is kept as ``.attempt<N>.orig``; the placeholder goes back in
-        place, so a file the rerun writes is told from one it does not, now holding
-        ``merge`` of itself (the attempts so far). False when it cannot be written.
+        place, so a file the rerun writes is told from one it does not, now beside the
+        attempts so far. False when it cannot be written.
         """
         self.properties = dict(properties)
         self.problems = []
-        self._merge = merge
+        self._series = True
         if self.path is None:
             return True
         assert self.original is not None
@@ -234,10 +196,10 @@ class ResultFile:
                 )
             else:
                 # Written again (a rerun that gets no ID) or merged, it names the file kept.
-                for said in (self.written, self.last_suite and self.last_suite.properties):
+                for said in (self.written, self._kept_last and self._kept_last.properties):
                     if said and said.get("original_result_file") == self.original.name:
                         said["original_result_file"] = kept.name
-        return self.write_placeholder(merge)
+        return self.write_placeholder()
 
     def case(self, outcome: Outcome, message: str = "", duration: float = 0.0) -> Case:
         """The test as one case, for a test that wrote no result of its own."""
@@ -281,36 +243,55 @@ class ResultFile:
 
         return self._final(build, checked)
 
-    def write_merged(self, merged: Suite) -> validate.Rendered | None:
-        """Write the suite of every attempt of a test run more than once, checked.
+    def write_attempts(self, domain_ids: Sequence[str]) -> validate.Rendered | None:
+        """Write the suite of every attempt kept, each on its ID, checked (merge_attempts).
 
         Properties added since (why a rerun did not run, a late signal) join its own.
         """
         if self.path is None:
             return None
+        from ros_isolated_test.xunit.attempts import merge_attempts
+
+        merged = merge_attempts(self._attempts)
+        merged.properties["ros_domain_ids"] = ", ".join(domain_ids)
 
         def build(properties: dict[str, str]) -> Suite:
             for name, value in properties.items():
                 merged.properties.setdefault(name, shown(value))
             return merged
 
-        self._merge = None  # it holds every attempt already
+        self._series = False  # it holds every attempt already
         return self._final(build, checked=True)
+
+    def _beside_earlier(self, suite: Suite, earlier: tuple[Suite, ...] | None) -> Suite:
+        """``suite`` after the earlier attempts of a series (None: no series); no copies.
+
+        merge_attempts builds new cases and never changes the suites it is given.
+        """
+        if earlier is None:
+            return suite
+        from ros_isolated_test.xunit.attempts import merge_attempts
+
+        return merge_attempts([*earlier, suite])
 
     def _final(
         self, build: Callable[[dict[str, str]], Suite], checked: bool
     ) -> validate.Rendered | None:
-        """Write ``build``'s suite (merged with the earlier attempts, in a rerun).
+        """Write ``build``'s suite (beside the earlier attempts, in a rerun).
 
         Returns this attempt's own rendering: whether *it* failed decides its exit code.
         """
         properties = dict(self.properties)
         suite = build(properties)
         rendered = validate.render(suite, checked)
-        merge = self._merge
-        data = rendered.data if merge is None else validate.render(merge(suite)).data
+        earlier = tuple(self._attempts) if self._series else None
+        data = (
+            rendered.data
+            if earlier is None
+            else validate.render(self._beside_earlier(suite, earlier)).data
+        )
         if self._write(data):
-            self.written, self._last, self.last_suite = properties, (build, checked, merge), suite
+            self.written, self._last, self.last_suite = properties, (build, checked, earlier), suite
             return rendered
         self._leave_word(suite.cases, suite.time)
         return None
@@ -322,11 +303,11 @@ class ResultFile:
         """
         if self.path is None or self._last is None:
             return
-        build, checked, merge = self._last
+        build, checked, earlier = self._last
         properties = dict(self.properties)
         suite = build(properties)
-        if merge is not None:
-            suite, checked = merge(suite), True
+        if earlier is not None:
+            suite, checked = self._beside_earlier(suite, earlier), True
         try:
             write_atomically(self.path, validate.render(suite, checked).data, replacing=self._kept)
         except OSError as error:
@@ -334,13 +315,13 @@ class ResultFile:
             return
         self.written = properties
 
-    def write_placeholder(self, merge: Callable[[Suite], Suite] | None = None) -> bool:
+    def write_placeholder(self) -> bool:
         """What ctest leaves behind if it kills the runner: the test did not finish.
 
-        It ends in a comment holding ``RESERVE_BYTES`` of room: should the final write
-        fail, the stand-in overwrites it in place, in blocks already allocated. False
-        when it could not be written (the error is on stderr, ``write_error`` says it).
-        ``merge``: for a rerun, what puts the earlier attempts beside it.
+        It ends in a comment holding room for a stand-in: should the final write fail,
+        the stand-in overwrites it in place, in blocks already allocated. False when it
+        could not be written (the error is on stderr, ``write_error`` says it). In a
+        rerun series it stands after the attempts so far.
         """
         if self.path is None:
             return True
@@ -350,11 +331,9 @@ class ResultFile:
             "the test most likely timed out."
         )
         suite = self._suite([self.case(Outcome.ERROR, message)], 0.0, dict(self.properties))
-        if merge is not None:
-            suite = merge(suite)
-        note = "<!-- room for the runner to say what happened if it cannot replace this file"
-        padding = f"{note}{' ' * max(RESERVE_BYTES - len(note) - 5, 0)} -->\n"
-        data = serialise.serialize(suite) + padding.encode()
+        if self._series:
+            suite = self._beside_earlier(suite, tuple(self._attempts))
+        data = placeholder.with_room(serialise.serialize(suite))
         if not self._write(data):
             return False
         self.placeholder = data
@@ -390,87 +369,20 @@ class ResultFile:
             return
         if self.placeholder is None:
             return
+        stand_in = placeholder.StandIn(
+            self._suite([self.case(Outcome.ERROR, "", duration)], duration, {}),
+            self._failure,
+            self.write_error or self._failure,
+            self.properties,
+            cases,
+        )
         try:
-            left = self._overwrite_placeholder(cases, duration)
+            left = placeholder.overwrite_in_place(self.path, self.placeholder, stand_in)
         except OSError as error:
             _say(f"error: cannot replace the placeholder at {self.path} either: {_reason(error)}")
             return
         if left:
             _say(f"a result saying it could not be written is left at {self.path}")
-
-    def _overwrite_placeholder(self, cases: list[Case], duration: float) -> bool:
-        """Overwrite our placeholder where it lies (no new blocks needed); False if not ours.
-
-        Padded to the placeholder's length, so the file is valid XML even if the
-        truncation that tidies it up never happens.
-        """
-        assert self.path is not None and self.placeholder is not None
-        if not stat.S_ISREG(os.lstat(self.path).st_mode):
-            return False  # never opened: opening a device can act on it
-        flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
-        fd = os.open(self.path, flags)
-        try:
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                return False
-            size = len(self.placeholder)
-            if os.pread(fd, size + 1, 0) != self.placeholder:
-                return False  # the test's own file: never ours to overwrite
-            data = self._stand_in(cases, duration, size)
-            padded = data + b"\n" * (size - len(data))
-            done = 0
-            while done < size:
-                count = os.pwrite(fd, padded[done:], done)
-                if count <= 0:
-                    raise OSError(errno.EIO, "the file took no more bytes")
-                done += count
-            with contextlib.suppress(OSError):
-                os.ftruncate(fd, len(data))
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        return True
-
-    def _stand_in(self, cases: list[Case], duration: float, room: int) -> bytes:
-        """A valid result, at most ``room`` bytes, saying why and how the test ended."""
-        reason = self.write_error or self._failure
-        ended = self.properties.get("exit")
-        if ended == "not run":
-            how = "The test did not run."
-        elif ended:
-            how = f"The test {ended}."
-        else:
-            how = "How the test ended is not known."
-        failing = [case for case in cases if case.outcome.failed]
-        held = f"The result would have held {len(cases)} test case(s), {len(failing)} failed"
-        if failing:
-            held += f"; the first: {failing[0].name}: {failing[0].message}"
-        why = f"{NOT_WRITTEN} ({self._failure})"
-        message = f"{why}: this short one stands in. {how} {held}."
-        properties = {
-            key: self.properties[key] for key in _STAND_IN_PROPERTIES if key in self.properties
-        }
-        properties["result_write_error"] = reason
-
-        def render(properties: dict[str, str], length: int) -> bytes:
-            case = self.case(Outcome.ERROR, message[:length], duration)
-            case.type = "ResultNotWritten"
-            return serialise.serialize(self._suite([case], duration, properties))
-
-        for kept in (properties, {"result_write_error": reason[:200]}):
-            data = render(kept, len(message))
-            if len(data) <= room:
-                return data
-        # The longest head of the message that fits (escaping makes bytes unpredictable).
-        low, high = len(why), len(message)
-        if len(render(kept, low)) > room:
-            raise OSError(errno.ENOSPC, "no room in the placeholder for the stand-in")
-        while low < high:
-            middle = (low + high + 1) // 2
-            if len(render(kept, middle)) <= room:
-                low = middle
-            else:
-                high = middle - 1
-        return render(kept, low)
 
     def untouched(self) -> bool:
         """Whether the test left our placeholder (or nothing) in place."""
@@ -478,7 +390,7 @@ class ResultFile:
             return True
         if self.own is not None and os.path.lexists(self.own):
             return False
-        if self.placeholder is not None and _holds_exactly(self.path, self.placeholder):
+        if self.placeholder is not None and placeholder.holds_exactly(self.path, self.placeholder):
             return True
         return not os.path.lexists(self.path)
 
@@ -517,8 +429,9 @@ class ResultFile:
 
 
 if TYPE_CHECKING:
-    #: A final word: how it is built from the properties, whether it is checked, the merge.
-    _Word = tuple[Callable[[dict[str, str]], Suite], bool, Callable[[Suite], Suite] | None]
+    #: A final word: how it is built from the properties, whether it is checked, and the
+    #: earlier attempts of its series (None: none).
+    _Word = tuple[Callable[[dict[str, str]], Suite], bool, tuple[Suite, ...] | None]
 
 
 def _keep_aside(path: Path, original: Path) -> None:
@@ -539,27 +452,6 @@ def _keep_aside(path: Path, original: Path) -> None:
         import shutil
 
         shutil.copy2(path, original, follow_symlinks=False)
-
-
-def _holds_exactly(path: Path, data: bytes) -> bool:
-    """Whether the file still holds ``data`` (the placeholder the test did not replace).
-
-    Opened without blocking and read only if it is a regular file: a test may leave a
-    FIFO at the path, and that must not hang the runner.
-    """
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
-    except OSError:
-        return False
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return False
-        held = b""
-        while len(held) <= len(data) and (chunk := os.read(fd, len(data) + 1 - len(held))):
-            held += chunk
-        return held == data
-    finally:
-        os.close(fd)
 
 
 def _remove(path: Path) -> None:
@@ -593,31 +485,3 @@ def _say(text: str) -> None:
     """One line on stderr; a reader that went away loses nothing the exit code keeps."""
     with contextlib.suppress(OSError, ValueError):
         print(f"ros-isolated-test: {text}", file=sys.stderr, flush=True)
-
-
-def read_cases(
-    path: Path, package: str | None, test_name: str
-) -> tuple[list[Case], reader.ReadResult]:
-    """The canonical cases of any result file, and what reading it found."""
-    from ros_isolated_test.xunit import normalise, reader
-
-    read = reader.read(path)
-    return normalise.cases_from(read, package, test_name), read
-
-
-def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, bool]:
-    """A producer's result file as canonical bytes, and whether anything in it failed."""
-    cases, read = read_cases(path, package, test_name)
-    properties = {"original_result_file": path.name}
-    if read.repairs:
-        properties["result_file_repairs"] = "; ".join(read.repairs)
-    suite = Suite(
-        name=f"{package}.{test_name}",
-        cases=cases,
-        time=sum(case.time for case in cases),
-        timestamp=validate.timestamp(),
-        hostname=validate.hostname(),
-        properties=properties,
-    )
-    rendered = validate.render(suite)
-    return rendered.data, rendered.failed

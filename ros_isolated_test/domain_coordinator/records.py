@@ -1,8 +1,10 @@
-"""Who holds a domain ID: the record a holder leaves beside its lock for ``status``.
+"""The holder record: who holds a domain ID, left beside its lock for ``status``.
 
 Records live in a directory every user may write to, so a record read back is
 untrusted: it is kept only when its PID and time are in range, and its text fields
 are made display-safe (no control character can forge a line or drive a terminal).
+The same checks read the records of the queue's tickets and of resource holds; a
+record's time and user are shown through :func:`iso_time` and :func:`user_name`.
 """
 
 from __future__ import annotations
@@ -17,13 +19,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
+from ros_isolated_test.domain_coordinator.lock_dir import owned_file, read_small_file
 from ros_isolated_test.process import proc
-from ros_isolated_test.text import DISPLAY_LIMIT, display_text
+from ros_isolated_test.text import DISPLAY_LIMIT, display_text, json_string
 
-#: JSON string escapes: quote, backslash and every control character.
-_JSON_ESCAPES = {ord('"'): '\\"', ord("\\"): "\\\\"} | {
-    code: f"\\u{code:04x}" for code in range(0x20)
-}
 #: Latest time a record may carry: the end of year 9999, which every strftime can show.
 LATEST_TIME = 253402300799.0
 #: Longest text shown for a record's command (user and host: :data:`SHORT_TEXT`).
@@ -73,18 +72,6 @@ class Holder:
             f'"host": {json_string(self.host)}',
         )
         return "{" + ", ".join(fields) + "}"
-
-
-def json_string(text: str) -> str:
-    r"""``text`` as a JSON string literal; lone surrogates (undecodable bytes) as ``\uXXXX``."""
-    escaped = text.translate(_JSON_ESCAPES)
-    try:
-        escaped.encode("utf-8")
-    except UnicodeEncodeError:
-        escaped = "".join(
-            f"\\u{ord(char):04x}" if 0xD800 <= ord(char) <= 0xDFFF else char for char in escaped
-        )
-    return f'"{escaped}"'
 
 
 def iso_time(when: float) -> str:
@@ -242,23 +229,3 @@ def remove_record(path: Path) -> None:
     if owned_file(path):
         with contextlib.suppress(OSError):
             path.unlink()
-
-
-def owned_file(path: Path) -> bool:
-    """Whether ``path`` is a regular file of ours (not a link, not someone else's)."""
-    try:
-        info = os.lstat(path)
-    except OSError:
-        return False
-    return stat.S_ISREG(info.st_mode) and info.st_uid == os.getuid()
-
-
-def read_small_file(path: Path, limit: int = 64 * 1024) -> str:
-    """A small regular file's text; never follows a link, never blocks on a FIFO."""
-    fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise OSError(f"{path} is not a regular file")
-        return os.read(fd, limit).decode("utf-8")
-    finally:
-        os.close(fd)

@@ -29,12 +29,13 @@ from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 from ros_isolated_test.atomic_file import write_atomically
-from ros_isolated_test.domain_coordinator import holder
+from ros_isolated_test.domain_coordinator import records
 from ros_isolated_test.domain_coordinator.flock import try_lock
 from ros_isolated_test.domain_coordinator.lock_dir import (
     LockDirError,
     UnusableLockFile,
     open_lock_file,
+    read_small_file,
 )
 from ros_isolated_test.domain_coordinator.queue import (
     RESOURCE_MARK,
@@ -144,7 +145,7 @@ def _records(queue: Queue) -> Iterator[tuple[Path, dict[str, object]]]:
     for path in queue.live_tickets():
         data: dict[str, object] | None
         try:
-            data = holder.parse_record(holder.read_small_file(path))
+            data = records.parse_record(read_small_file(path))
         except (OSError, ValueError):
             data = None
         yield path, data or {}
@@ -169,16 +170,16 @@ def _hold(
     path: Path, data: dict[str, object], limit: int, survivors: tuple[int, ...] = ()
 ) -> Hold | None:
     try:
-        owner = holder.user_name(os.lstat(path).st_uid)
+        owner = records.user_name(os.lstat(path).st_uid)
     except OSError:
         return None  # released meanwhile
     domain_id = data.get("domain_id")
     return Hold(
-        pid=holder.record_pid(data.get("pid"), limit) or 0,
+        pid=records.record_pid(data.get("pid"), limit) or 0,
         user=owner,
-        command=holder.record_text(data.get("command"), holder.LONG_TEXT) or "(no record)",
-        since=holder.record_time(data.get("started")) or 0.0,
-        host=holder.record_text(data.get("host")) or "",
+        command=records.record_text(data.get("command"), records.LONG_TEXT) or "(no record)",
+        since=records.record_time(data.get("started")) or 0.0,
+        host=records.record_text(data.get("host")) or "",
         resources=record_amounts(data.get("resources")),
         capacity=record_amounts(data.get("capacity")),
         domain_id=domain_id if type(domain_id) is int and 0 <= domain_id < 1000 else None,
@@ -196,7 +197,7 @@ def keep_for(holding: Ticket, processes: Iterable[proc.Stat]) -> Path:
     """
     import json  # only when survivors are kept: never on a test's usual path
 
-    data = holder.parse_record(holder.read_small_file(holding.path)) or {}
+    data = records.parse_record(read_small_file(holding.path)) or {}
     data["survivors"] = [[process.pid, process.start] for process in processes]
     data["boot"] = proc.boot_id()
     data["pidns"] = proc.pid_namespace()
@@ -226,7 +227,7 @@ def _kept(queue: Queue, limit: int) -> list[Hold]:
 
 def _kept_hold(path: Path, limit: int) -> Hold | None:
     try:
-        data = holder.parse_record(holder.read_small_file(path))
+        data = records.parse_record(read_small_file(path))
     except (OSError, ValueError):
         return None
     if data is None or data.get("pidns") != proc.pid_namespace():
@@ -238,12 +239,12 @@ def _kept_hold(path: Path, limit: int) -> Hold | None:
             if not (isinstance(item, list) and len(item) == 2):
                 continue
             pid, start = item
-            if holder.record_pid(pid, limit) is None or type(start) is not int:
+            if records.record_pid(pid, limit) is None or type(start) is not int:
                 continue
             if proc.living(pid, start) is not None:
                 alive.append(pid)
     if not alive:
-        holder.remove_record(path)  # only when ours (a planted or another user's one stays)
+        records.remove_record(path)  # only when ours (a planted or another user's one stays)
         return None
     return _hold(path, data, limit, tuple(alive))
 
@@ -259,7 +260,7 @@ def demands(queue: Queue) -> list[Demand]:
             continue
         data: dict[str, object] | None
         try:
-            data = holder.parse_record(holder.read_small_file(path))
+            data = records.parse_record(read_small_file(path))
         except (OSError, ValueError):
             data = None
         data = data or {}
@@ -269,7 +270,7 @@ def demands(queue: Queue) -> list[Demand]:
                 record_amounts(data.get("resources")),
                 domain=data.get("domain") is not False,
                 capacity=record_amounts(data.get("capacity")),
-                pid=holder.record_pid(data.get("pid"), limit) or 0,
+                pid=records.record_pid(data.get("pid"), limit) or 0,
             )
         )
     return found

@@ -1,0 +1,56 @@
+"""Any producer's result file made canonical: the test it belongs to, its cases, its bytes.
+
+Apart from one test's file through its life (``result_file``): the runner adopts the
+file its test wrote, and ``ros-isolated-test normalise`` rewrites a file nobody ran
+here; both read it the same way. The reader, and lxml behind it, are imported only
+when a file is read: a test that wrote no file of its own never loads them.
+"""
+
+from __future__ import annotations
+
+from ros_isolated_test.xunit import validate
+from ros_isolated_test.xunit.model import Suite
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from ros_isolated_test.xunit import raw
+    from ros_isolated_test.xunit.model import Case
+
+
+def test_name_of(result_file: Path) -> str:
+    """The test a result file belongs to: its name without the producer's suffix."""
+    name = result_file.name
+    for suffix in (".gtest.xml", ".xunit.xml", ".xml"):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def read_cases(
+    path: Path, package: str | None, test_name: str
+) -> tuple[list[Case], raw.ReadResult]:
+    """The canonical cases of any result file, and what reading it found."""
+    from ros_isolated_test.xunit import normalise, reader
+
+    read = reader.read(path)
+    return normalise.cases_from(read, package, test_name), read
+
+
+def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, bool]:
+    """A producer's result file as canonical bytes, and whether anything in it failed."""
+    cases, read = read_cases(path, package, test_name)
+    properties = {"original_result_file": path.name}
+    if read.repairs:
+        properties["result_file_repairs"] = "; ".join(read.repairs)
+    suite = Suite(
+        name=f"{package}.{test_name}",
+        cases=cases,
+        time=sum(case.time for case in cases),
+        timestamp=validate.timestamp(),
+        hostname=validate.hostname(),
+        properties=properties,
+    )
+    rendered = validate.render(suite)
+    return rendered.data, rendered.failed

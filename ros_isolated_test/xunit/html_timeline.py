@@ -1,0 +1,365 @@
+"""The report page's timeline: one bar per attempt, where and when it ran, drawn on a time axis.
+
+Read from what the runner records in each result file (``result_file.STARTED_AT`` and
+its neighbours: when each attempt ran, on which domain ID, what it waited for first and
+what it held), or from another producer's own timestamp; then placed in rows per (host,
+domain ID), lanes only where bars overlap, and a round-numbered axis. Apart from the
+rest of the page because this is the one part that reasons about time and placement.
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+from collections.abc import Callable
+from html import escape
+
+from ros_isolated_test.xunit import raw
+from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY
+from ros_isolated_test.xunit.html_parts import attr, local, text
+from ros_isolated_test.xunit.report import FileReport
+from ros_isolated_test.xunit.timeline import ENDED_AT, STARTED_AT, WAIT_DOMAIN, WAIT_RESOURCES
+
+#: Timestamps before this are a producer's placeholder (gtest writes 1970-01-01).
+_PLAUSIBLE = datetime.datetime(2000, 1, 1, tzinfo=datetime.timezone.utc).timestamp()
+
+
+class Bar:
+    """One attempt of one test on the timeline; times in seconds since the epoch."""
+
+    __slots__ = (
+        "attempt",
+        "attempts",
+        "domain",
+        "end",
+        "host",
+        "resources",
+        "start",
+        "state",
+        "target",
+        "test",
+        "wait_domain",
+        "wait_resources",
+    )
+
+    def __init__(
+        self,
+        test: str,
+        host: str,
+        domain: str,
+        start: float,
+        end: float,
+        state: str,
+        target: str,
+        attempt: int = 1,
+        attempts: int = 1,
+        wait_domain: float = 0.0,
+        wait_resources: float = 0.0,
+        resources: str = "",
+    ) -> None:
+        self.test = test
+        self.host = host
+        #: The ID as the result says it ("17"); "" when the test had none of ours.
+        self.domain = domain
+        self.start = start
+        self.end = max(end, start)
+        #: passed, failed, flaky (a failed attempt of a test that passed in the end),
+        #: timeout or skipped: the bar's colour.
+        self.state = state
+        #: Where a click on the bar leads: the test's failure, flaky case or suite.
+        self.target = target
+        self.attempt = attempt
+        self.attempts = attempts
+        self.wait_domain = wait_domain
+        self.wait_resources = wait_resources
+        self.resources = resources
+
+
+def bars_of(
+    properties: dict[str, str],
+    read: raw.ReadResult,
+    test: str,
+    host: str,
+    report: FileReport,
+    target: str,
+) -> list[Bar]:
+    """The file's attempts on the timeline: each one the runner recorded.
+
+    A file that does not say (another producer's, an older runner's) gets one bar from
+    its own timestamp and time, when it has a plausible one.
+    """
+    final = _final_state(properties.get("exit", ""), report)
+    if STARTED_AT not in properties:
+        span = _producer_span(read)
+        if span is None:
+            return []
+        domain = _domain(properties, "")
+        return [Bar(test, host, domain, span[0], span[1], final, target)]
+    total = _number(properties.get(ATTEMPTS_PROPERTY, "1"), 1)
+    bars: list[Bar] = []
+    for attempt in range(1, total + 1):
+        prefix = "" if attempt == total else f"attempt_{attempt}."
+        if prefix and f"{prefix}{STARTED_AT}" not in properties:
+            continue  # not kept (a long series keeps the first and last few)
+
+        def value(name: str, prefix: str = prefix) -> str:
+            return properties.get(f"{prefix}{name}", properties.get(name, ""))
+
+        start = _instant(value(STARTED_AT))
+        if start is None:
+            continue
+        end = _instant(value(ENDED_AT)) or start
+        if prefix:
+            failed = "timeout" if "timed out" in value("exit") else "failed"
+            state = failed if report.failed or failed == "timeout" else "flaky"
+        else:
+            state = final
+        bars.append(
+            Bar(
+                test,
+                host,
+                _domain(properties, prefix),
+                start,
+                end,
+                state,
+                target,
+                attempt,
+                total,
+                _seconds(value(WAIT_DOMAIN)),
+                _seconds(value(WAIT_RESOURCES)),
+                value("resources"),
+            )
+        )
+    return bars
+
+
+def _final_state(exit_reason: str, report: FileReport) -> str:
+    if "timed out" in exit_reason:
+        return "timeout"
+    if report.failed:
+        return "failed"
+    if report.tests and report.skipped == report.tests:
+        return "skipped"
+    return "passed"
+
+
+def _domain(properties: dict[str, str], prefix: str) -> str:
+    """The attempt's domain ID as a number's text; "" without one of ours (isolation off)."""
+    if properties.get("isolation") == "disabled":
+        return ""
+    value = properties.get(f"{prefix}ros_domain_id", properties.get("ros_domain_id", ""))
+    return value if value.isascii() and value.isdigit() else ""
+
+
+def _producer_span(read: raw.ReadResult) -> tuple[float, float] | None:
+    """When a producer's own file says it ran: its earliest plausible timestamp and time."""
+    start: float | None = None
+    end = 0.0
+    for attrs in [suite.attrs for suite in read.suites] + [read.root_attrs]:
+        began = _instant(attrs.get("timestamp", ""))
+        if began is None or began < _PLAUSIBLE:
+            continue
+        start = began if start is None else min(start, began)
+        end = max(end, began + _seconds(attrs.get("time", "")))
+    return None if start is None else (start, max(end, start))
+
+
+def _instant(text: str) -> float | None:
+    """ISO 8601 as seconds since the epoch; a time without a zone is local time."""
+    text = text.strip()
+    if not text:
+        return None
+    if text.endswith(("Z", "z")):
+        text = text[:-1] + "+00:00"
+    try:
+        return datetime.datetime.fromisoformat(text).timestamp()
+    except (ValueError, OverflowError, OSError):
+        return None
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text.replace(",", ""))
+    except ValueError:
+        return 0.0
+    return value if math.isfinite(value) and value > 0 else 0.0
+
+
+def _number(text: str, default: int) -> int:
+    return int(text) if text.isascii() and text.isdigit() and int(text) > 0 else default
+
+
+def runs(bars: list[Bar]) -> str:
+    """Where each attempt ran and how it ended: which attempt of a flaky test failed where."""
+    said = []
+    for bar in bars:
+        where = f" on ID {bar.domain}" if bar.domain else ""
+        which = f"attempt {bar.attempt} " if bar.attempts > 1 else ""
+        state = "failed" if bar.state == "flaky" else _STATE_WORDS.get(bar.state, bar.state)
+        said.append(f"{which}{state}{where}, {bar.end - bar.start:.2f} s")
+    return "".join(f"<br>{escape(line)}" for line in said)
+
+
+_STATES = (
+    ("passed", "passed"),
+    ("failed", "failed"),
+    ("flaky", "failed, passed later (flaky)"),
+    ("timeout", "timed out"),
+    ("skipped", "skipped"),
+    ("wait", "waiting for an ID"),
+    ("waitres", "waiting for resources"),
+)
+
+
+def timeline_html(bars: list[Bar]) -> str:
+    """The bars, one row per (host, domain ID), lanes only where bars overlap in a row."""
+    legend = "".join(f"<span><i class=k-{key}></i>{escape(text)}</span>" for key, text in _STATES)
+    head = f"<h2>Timeline</h2><div class=legend>{legend}</div>"
+    if not bars:
+        return head + "<p class=none>No result file says when it ran: nothing to draw.</p>"
+    t0 = min(bar.start for bar in bars)
+    low = min(bar.start - bar.wait_domain - bar.wait_resources for bar in bars)
+    high = max(bar.end for bar in bars)
+    span = max(high - low, 1e-3)
+    # A file that names no host (other producers') is on the one host, when there is one.
+    hosts = {bar.host for bar in bars if bar.host}
+    several = len(hosts) > 1
+    rows: dict[tuple[str, int, str], list[Bar]] = {}
+    for bar in bars:
+        key = (bar.host if several else "", 0 if bar.domain else 1, bar.domain.zfill(4))
+        rows.setdefault(key, []).append(bar)
+
+    def pos(when: float) -> str:
+        return f"{(when - low) / span * 100:.4f}%"
+
+    def place(begin: float, end: float) -> str:
+        return f"left:{pos(begin)};width:{(end - begin) / span * 100:.4f}%"
+
+    parts = [
+        head,
+        f'<div id=timeline data-t0="{t0:.6f}" data-low="{low - t0:.6f}" '
+        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}"><div class=tgrid>',
+    ]
+    for tick in _ticks(low - t0, high - t0):
+        # A label at the right edge would be cut: its line alone says enough.
+        label = _tick_label(tick) if (t0 + tick - low) / span < 0.95 else ""
+        parts.append(f'<div class=tick style="left:{pos(t0 + tick)}"><span>{label}</span></div>')
+    parts.append("</div><div class=taxis></div>")
+    for (host, _, _), members in sorted(rows.items()):
+        members.sort(key=lambda bar: (bar.start, bar.end))
+        lanes: list[float] = []
+        placed: list[tuple[Bar, int]] = []
+        for bar in members:
+            lane = next((i for i, end in enumerate(lanes) if end <= bar.start), len(lanes))
+            if lane == len(lanes):
+                lanes.append(bar.end)
+            else:
+                lanes[lane] = bar.end
+            placed.append((bar, lane))
+        domain = members[0].domain
+        name = f"ID {domain}" if domain else "no domain ID"
+        if several:
+            name = f"{host or '(host not recorded)'} · {name}"
+        clash = " clash" if domain and len(lanes) > 1 else ""
+        title = " (used by two tests at once)" if clash else ""
+        parts.append(
+            f'<div class="trow{clash}" data-row="{attr(name)}" data-host="{attr(host)}" '
+            f'data-domain="{attr(domain)}"><div class=tlabel title="{attr(name + title)}">'
+            f'{text(name, 128)}</div><div class=tlane style="--lanes:{len(lanes)}">'
+        )
+        for bar, lane in placed:
+            parts.append(_bar_html(bar, lane, t0, span, place))
+        parts.append("</div></div>")
+    parts.append(f"</div><p class=where>0 s = {escape(local(t0))}, the earliest start.</p>")
+    return "".join(parts)
+
+
+def _bar_html(
+    bar: Bar, lane: int, t0: float, span: float, place: Callable[[float, float], str]
+) -> str:
+    """The bar of one attempt, after the wait before it (for an ID, then for resources)."""
+    card = _card(bar, t0)
+    common = f'data-test="{attr(bar.test)}" data-domain="{attr(bar.domain)}"'
+    parts = []
+    waited = bar.wait_domain + bar.wait_resources
+    if waited > 0:
+        begin = bar.start - waited
+        for kind, seconds in (("domain", bar.wait_domain), ("resources", bar.wait_resources)):
+            if seconds <= 0:
+                continue
+            parts.append(
+                f'<div class="wait {kind}" {common} data-seconds="{seconds:.3f}" '
+                f'style="{place(begin, begin + seconds)};--lane:{lane}" '
+                f'title="{attr(card)}" data-card="{attr(card)}"></div>'
+            )
+            begin += seconds
+    short = bar.test.split(".", 1)[1] if "." in bar.test else bar.test
+    label = short if bar.attempts == 1 else f"{short} ({bar.attempt}/{bar.attempts})"
+    # A bar too narrow for its name keeps it for tools and the hover card, not drawn.
+    narrow = " narrow" if (bar.end - bar.start) / span < 0.03 else ""
+    parts.append(
+        f'<a class="bar {bar.state}{narrow}" href="#{bar.target}" {common} '
+        f'data-start="{bar.start - t0:.6f}" data-end="{bar.end - t0:.6f}" '
+        f'data-state="{bar.state}" data-attempt="{bar.attempt}" data-attempts="{bar.attempts}" '
+        f'data-host="{attr(bar.host)}" data-resources="{attr(bar.resources)}" '
+        f'data-wait-domain="{bar.wait_domain:.3f}" data-wait-resources="{bar.wait_resources:.3f}" '
+        f'style="{place(bar.start, bar.end)};--lane:{lane}" title="{attr(card)}" '
+        f'data-card="{attr(card)}">{text(label, 256)}</a>'
+    )
+    return "".join(parts)
+
+
+_STATE_WORDS = {
+    "passed": "passed",
+    "failed": "failed",
+    "flaky": "failed (the test passed in a later attempt)",
+    "timeout": "timed out",
+    "skipped": "skipped",
+}
+
+
+def _card(bar: Bar, t0: float) -> str:
+    """What hovering a bar says: the test, the attempt, where, how long, what it held."""
+    lines = [bar.test]
+    attempt = f"attempt {bar.attempt} of {bar.attempts}: " if bar.attempts > 1 else ""
+    lines.append(f"{attempt}{_STATE_WORDS.get(bar.state, bar.state)}")
+    where = f"ROS_DOMAIN_ID {bar.domain}" if bar.domain else "no domain ID of ours"
+    if bar.host:
+        where += f" on {bar.host}"
+    lines.append(where)
+    lines.append(f"ran {bar.end - bar.start:.2f} s, from +{bar.start - t0:.2f} s")
+    if bar.wait_domain or bar.wait_resources:
+        lines.append(
+            f"waited {bar.wait_domain:.2f} s for an ID, {bar.wait_resources:.2f} s for resources"
+        )
+    lines.append(f"held {bar.resources}" if bar.resources else "held no resources")
+    return "\n".join(lines)
+
+
+_CLOCK_STEPS = (60, 120, 300, 600, 900, 1800, 3600, 7200, 10800, 21600, 43200, 86400)
+
+
+def _ticks(low: float, high: float) -> list[float]:
+    """Round times between ``low`` and ``high``: about eight of them."""
+    span = max(high - low, 1e-3)
+    raw = span / 8
+    magnitude = 10 ** math.floor(math.log10(raw))
+    step = next(m * magnitude for m in (1, 2, 5, 10) if m * magnitude >= raw)
+    if step > 30:  # minutes and hours, not 50000 s
+        step = next((clock for clock in _CLOCK_STEPS if clock >= raw), step)
+    first = math.ceil(low / step) * step
+    count = int((high - first) / step) + 1
+    return [first + i * step for i in range(max(count, 0))]
+
+
+def _tick_label(seconds: float) -> str:
+    """``-2 s``, ``1.5 s``, ``2 min 30 s``, ``3 h 20 min``: what an axis of that span needs."""
+    sign = "-" if seconds < 0 else ""
+    value = abs(seconds)
+    if value < 120:
+        return f"{sign}{value:.3f}".rstrip("0").rstrip(".") + " s"
+    if value < 7200:
+        minutes, rest = divmod(round(value), 60)
+        return f"{sign}{minutes} min" + (f" {rest} s" if rest else "")
+    hours, rest = divmod(round(value / 60), 60)
+    return f"{sign}{hours} h" + (f" {rest} min" if rest else "")

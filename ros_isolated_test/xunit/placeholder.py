@@ -1,0 +1,159 @@
+"""The placeholder's reserved room, and the stand-in that overwrites it in place.
+
+Apart from the result file's life cycle (``result_file``) because it is the one write
+that must not need the file system's help: when the final word cannot be written (a
+disk that filled up while the test ran), the placeholder must not stay behind saying
+the test most likely timed out. It is overwritten where it lies, in blocks it already
+holds, by a short result saying the write failed and how the test ended; the
+placeholder is written with room for that.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import stat
+
+from ros_isolated_test.text import shown
+from ros_isolated_test.xunit import serialise
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from pathlib import Path
+
+    from ros_isolated_test.xunit.model import Case, Suite
+
+#: How the stand-in for a result that could not be written begins.
+NOT_WRITTEN = "ros-isolated-test could not write this result file"
+#: Bytes the placeholder holds beyond its own content, so the stand-in always fits.
+RESERVE_BYTES = 1024
+#: Properties the stand-in keeps while they fit: how the test ended, and on which ID.
+_STAND_IN_PROPERTIES = ("exit", "exit_code", "signal", "duration", "ros_domain_id")
+
+
+def with_room(data: bytes) -> bytes:
+    """The placeholder's bytes: ``data`` and a comment holding ``RESERVE_BYTES`` of room."""
+    note = "<!-- room for the runner to say what happened if it cannot replace this file"
+    padding = f"{note}{' ' * max(RESERVE_BYTES - len(note) - 5, 0)} -->\n"
+    return data + padding.encode()
+
+
+def holds_exactly(path: Path, data: bytes) -> bool:
+    """Whether the file still holds ``data`` (the placeholder the test did not replace).
+
+    Opened without blocking and read only if it is a regular file: a test may leave a
+    FIFO at the path, and that must not hang the runner.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return False
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        held = b""
+        while len(held) <= len(data) and (chunk := os.read(fd, len(data) + 1 - len(held))):
+            held += chunk
+        return held == data
+    finally:
+        os.close(fd)
+
+
+class StandIn:
+    """A valid result saying the final word could not be written, and how the test ended.
+
+    ``suite`` is the runner's own suite for the test, holding its one case (an error);
+    the case's message and the suite's properties are set here, cut to the room there is.
+    ``failure`` is why the write failed, in the system's words; ``reason`` the full
+    error; ``properties`` the run's; ``cases`` those the final word would have held.
+    """
+
+    __slots__ = ("_message", "_properties", "_reason", "_suite", "_why")
+
+    def __init__(
+        self,
+        suite: Suite,
+        failure: str,
+        reason: str,
+        properties: dict[str, str],
+        cases: Sequence[Case],
+    ) -> None:
+        ended = properties.get("exit")
+        if ended == "not run":
+            how = "The test did not run."
+        elif ended:
+            how = f"The test {ended}."
+        else:
+            how = "How the test ended is not known."
+        failing = [case for case in cases if case.outcome.failed]
+        held = f"The result would have held {len(cases)} test case(s), {len(failing)} failed"
+        if failing:
+            held += f"; the first: {failing[0].name}: {failing[0].message}"
+        self._why = f"{NOT_WRITTEN} ({failure})"
+        self._message = f"{self._why}: this short one stands in. {how} {held}."
+        self._properties = {
+            key: properties[key] for key in _STAND_IN_PROPERTIES if key in properties
+        }
+        self._properties["result_write_error"] = reason
+        self._reason = reason
+        self._suite = suite
+
+    def render(self, room: int) -> bytes:
+        """The stand-in in at most ``room`` bytes: properties dropped, then the message cut."""
+        message = self._message
+        for kept in (self._properties, {"result_write_error": self._reason[:200]}):
+            data = self._rendered(kept, len(message))
+            if len(data) <= room:
+                return data
+        # The longest head of the message that fits (escaping makes bytes unpredictable).
+        low, high = len(self._why), len(message)
+        if len(self._rendered(kept, low)) > room:
+            raise OSError(errno.ENOSPC, "no room in the placeholder for the stand-in")
+        while low < high:
+            middle = (low + high + 1) // 2
+            if len(self._rendered(kept, middle)) <= room:
+                low = middle
+            else:
+                high = middle - 1
+        return self._rendered(kept, low)
+
+    def _rendered(self, properties: dict[str, str], length: int) -> bytes:
+        (case,) = self._suite.cases
+        case.message = case.text = shown(self._message[:length])
+        case.type = "ResultNotWritten"
+        self._suite.properties = {name: shown(value) for name, value in properties.items()}
+        return serialise.serialize(self._suite)
+
+
+def overwrite_in_place(path: Path, placeholder: bytes, stand_in: StandIn) -> bool:
+    """Overwrite our placeholder where it lies (no new blocks needed); False if not ours.
+
+    Padded to the placeholder's length, so the file is valid XML even if the
+    truncation that tidies it up never happens.
+    """
+    if not stat.S_ISREG(os.lstat(path).st_mode):
+        return False  # never opened: opening a device can act on it
+    flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    fd = os.open(path, flags)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        size = len(placeholder)
+        if os.pread(fd, size + 1, 0) != placeholder:
+            return False  # the test's own file: never ours to overwrite
+        data = stand_in.render(size)
+        padded = data + b"\n" * (size - len(data))
+        done = 0
+        while done < size:
+            count = os.pwrite(fd, padded[done:], done)
+            if count <= 0:
+                raise OSError(errno.EIO, "the file took no more bytes")
+            done += count
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, len(data))
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    return True
