@@ -189,6 +189,30 @@ class Context:
             *command,
         ]
 
+    def start_runners(
+        self, runner: str, results: Sequence[Path], command: Sequence[str], env: Mapping[str, str]
+    ) -> list[subprocess.Popen[bytes]]:
+        """One ``runner`` per result path, all started at once, as ``ctest -j`` starts them."""
+        return [
+            subprocess.Popen(
+                self.runner_command(runner, result, command),
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.STDOUT,
+            )
+            for result in results
+        ]
+
+    def pair_section(self, title: str) -> tuple[list[tuple[str, str]], Section]:
+        """The pairs here, and a table with ours, upstream and their ratio for each pair."""
+        pairs = self.pairs()
+        header = [""]
+        for ours, upstream in pairs:
+            header += [LABELS[ours], LABELS[upstream], f"ours / {LABELS[upstream].split()[0]}"]
+        header.append("target")
+        return pairs, Section(title, header)
+
     def environment(self, runner: str = OURS, **extra: str) -> dict[str, str]:
         """``runner``'s environment (its venv's; shared within a pair) plus ``extra``."""
         env = dict(self.envs.get(runner, self.env))

@@ -243,15 +243,9 @@ def run(ctx: Context) -> Section:
             results[scene, runner].append(one_round(ctx, runner, next(counter)))
 
     scene_note = idle_scene.in_scenes(ctx.python, ctx.work, rounds, rounds_of)
-    pairs = ctx.pairs()
-    header = [""]
-    for ours, upstream in pairs:
-        header += [LABELS[ours], LABELS[upstream], f"ours / {LABELS[upstream].split()[0]}"]
-    header.append("target")
-    section = Section(
+    pairs, section = ctx.pair_section(
         f"2. Acquisition under contention: {PROCESSES} processes ask for an ID at once, "
         f"{rounds} round(s) each per scene, interleaved",
-        header,
     )
     for scene in (QUIET, BUSY):
         section.rows.extend(_scene_rows(scene, {r: results[scene, r] for r in runners}, pairs))

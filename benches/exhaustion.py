@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import socket
-import subprocess
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -99,16 +98,7 @@ def one_round(ctx: Context, runner: str, pool: list[int], index: int) -> Round:
     env = ctx.environment(runner, ROS_ISOLATED_TEST_DOMAINS=",".join(str(i) for i in pool))
     results = [scratch / f"test{n}.xml" for n in range(TESTS)]
     start = time.perf_counter()
-    procs = [
-        subprocess.Popen(
-            ctx.runner_command(runner, result, ("sleep", f"{SLEEP_SECONDS:g}")),
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.STDOUT,
-        )
-        for result in results
-    ]
+    procs = ctx.start_runners(runner, results, ("sleep", f"{SLEEP_SECONDS:g}"), env)
     codes = [proc.wait(300) for proc in procs]
     wall = time.perf_counter() - start
     return Round(
@@ -135,15 +125,9 @@ def run(ctx: Context) -> Section:
     failed = {r: sum(x.failed for x in results[r]) for r in runners}
     written = {r: sum(x.results_written for x in results[r]) for r in runners}
     total = TESTS * rounds
-    pairs = ctx.pairs()
-    header = [""]
-    for ours, upstream in pairs:
-        header += [LABELS[ours], LABELS[upstream], f"ours / {LABELS[upstream].split()[0]}"]
-    header.append("target")
-    section = Section(
+    pairs, section = ctx.pair_section(
         f"3. Exhaustion: {TESTS} concurrent {SLEEP_SECONDS:g} s tests on a pool of "
         f"{POOL_SIZE} IDs, {rounds} round(s) each, interleaved",
-        header,
     )
     none_failed = ", ".join(f"{verdict(failed[o] == 0)} ({LABELS[u].split()[0]})" for o, u in pairs)
     table: list[tuple[str, Callable[[str], str], Callable[[str, str], str], str]] = [

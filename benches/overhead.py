@@ -236,15 +236,9 @@ def run(ctx: Context) -> Section:
     progress("overhead: import profile of ours (-X importtime)")
     profile = import_profile(ctx, 3)
 
-    pairs = ctx.pairs()
-    header: list[str] = [""]
-    for ours, upstream in pairs:
-        header += [LABELS[ours], LABELS[upstream], f"ours / {LABELS[upstream].split()[0]}"]
-    header.append("target")
-    section = Section(
+    pairs, section = ctx.pair_section(
         f"1. Per-test overhead: a no-op test (`true`, --generate-result-on-success), "
         f"{reps} runs each per scene, interleaved",
-        header,
     )
 
     def row(

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import os
-import subprocess
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -45,16 +44,7 @@ def one_wave(ctx: Context, runner: str, index: int) -> tuple[float, int, int]:
     env = ctx.environment(runner)
     results = [scratch / f"test{n}.xml" for n in range(TESTS)]
     start = time.perf_counter()
-    procs = [
-        subprocess.Popen(
-            ctx.runner_command(runner, result, NOOP),
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.STDOUT,
-        )
-        for result in results
-    ]
+    procs = ctx.start_runners(runner, results, NOOP, env)
     codes = [proc.wait(600) for proc in procs]
     wall = time.perf_counter() - start
     failed = sum(1 for code in codes if code != 0)
@@ -80,15 +70,9 @@ def run(ctx: Context) -> Section:
 
     scene_note = idle_scene.in_scenes(ctx.python, ctx.work, reps, waves)
     wall = {key: median(values) for key, values in walls.items()}
-    pairs = ctx.pairs()
-    header = [""]
-    for ours, upstream in pairs:
-        header += [LABELS[ours], LABELS[upstream], f"ours / {LABELS[upstream].split()[0]}"]
-    header.append("target")
-    section = Section(
+    pairs, section = ctx.pair_section(
         f"7. Wave: {TESTS} no-op tests started at once through the RUNNER, {reps} wave(s) "
         f"each per scene, interleaved",
-        header,
     )
     pair_ratio = {
         (scene, o): quotient(wall.get((scene, o), nan()), wall.get((scene, u), nan()))

@@ -1,6 +1,6 @@
 """Build and test the crosstalk_demo package in a throwaway colcon workspace.
 
-examples/demo.py and tests/test_example_package.py both drive colcon through these helpers,
+examples/demo.py and tests/e2e/test_example_package.py both drive colcon through these helpers,
 so the demo and its test check exactly the same thing. Everything is derived from the
 interpreter running this module (a virtualenv with ROS 2, ament_cmake and colcon), so no
 ROS setup script has to be sourced first; a :class:`Toolchain` names another such venv (the

@@ -1,11 +1,9 @@
-"""The ``ros-isolated-test`` command: parses arguments into a request and nothing more."""
+"""The ``ros-isolated-test`` command: parses arguments and hands each command to its layer."""
 
 from __future__ import annotations
 
-import json
 import math
 import sys
-from importlib import resources
 from pathlib import Path
 
 import click
@@ -30,8 +28,6 @@ from ros_isolated_test.runner.settings import (
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from typing import NoReturn
-
     from ros_isolated_test.xunit.report import FileReport
 
 EXIT_CODES_HELP = """\b
@@ -267,33 +263,17 @@ def run(
 
 @cli.command("runner-path")
 def runner_path() -> None:
-    r"""Print the path of the ctest RUNNER script for ament_add_test / add_launch_test.
+    """Print the path of the ctest RUNNER script for ament_add_test / add_launch_test.
 
     \b
     In CMakeLists.txt:
       execute_process(COMMAND ros-isolated-test runner-path
         OUTPUT_VARIABLE RUNNER OUTPUT_STRIP_TRAILING_WHITESPACE COMMAND_ERROR_IS_FATAL ANY)
       ament_add_test(my_test RUNNER "${RUNNER}" COMMAND ...)
-    """
-    script = resources.files("ros_isolated_test.runner.ament") / "run_test_isolated.py"
-    click.echo(str(Path(str(script)).resolve()))
+    """  # noqa: D301 (click reads a backspace, not a backslash, as "keep these lines")
+    from ros_isolated_test.runner.ament import installed
 
-
-#: The CMake file of ``cmake-include``, with the CMake package (pip: <prefix>/share/...).
-CMAKE_INCLUDE = Path("share/ros_isolated_test/cmake/ros_isolated_test_project_include.cmake")
-
-
-def _cmake_include() -> Path | None:
-    """Where this installation's CMake include is, or None when it is not installed.
-
-    pip puts share/ beside the lib/ holding the package (a venv, --prefix, --user); an
-    editable install or a checkout has only the package's own cmake/ folder. Not resolved:
-    a linked share/ (scripts/setup.sh) keeps the prefix whose bin/ the CMake files use.
-    """
-    package = Path(str(resources.files("ros_isolated_test")))
-    candidates = [parent / CMAKE_INCLUDE for parent in package.parents]
-    candidates.append(package / "cmake" / CMAKE_INCLUDE.name)
-    return next((path.absolute() for path in candidates if path.is_file()), None)
+    click.echo(str(installed.runner_script()))
 
 
 @cli.command("cmake-include")
@@ -312,24 +292,18 @@ def cmake_include(colcon_defaults: bool) -> None:
       COLCON_DEFAULTS_FILE=isolated.yaml colcon build
     Off: --cmake-args -DROS_ISOLATED_TEST_ALL=OFF, or -UCMAKE_PROJECT_INCLUDE to drop it.
     """  # noqa: D301 (click reads a backspace, not a backslash, as "keep these lines")
-    path = _cmake_include()
+    from ros_isolated_test.runner.ament import installed
+
+    path = installed.cmake_include()
     if path is None:
         click.echo(
-            f"ros-isolated-test: error: the CMake files are not installed ({CMAKE_INCLUDE} "
-            "beside this package); reinstall ros-isolated-test with pip",
+            f"ros-isolated-test: error: the CMake files are not installed "
+            f"({installed.CMAKE_INCLUDE} beside this package); reinstall ros-isolated-test "
+            "with pip",
             err=True,
         )
         sys.exit(2)
-    if not colcon_defaults:
-        click.echo(str(path))
-        return
-    argument = json.dumps(f"-DCMAKE_PROJECT_INCLUDE={path}")  # JSON strings are YAML's too
-    click.echo(
-        "# colcon defaults (COLCON_DEFAULTS_FILE): ros-isolated-test isolates the tests of\n"
-        "# every ament_cmake package colcon builds. A --cmake-args given on the command line\n"
-        "# replaces this list: name the include there too.\n"
-        f"build:\n  cmake-args:\n    - {argument}"
-    )
+    click.echo(installed.colcon_defaults(path) if colcon_defaults else str(path))
 
 
 @cli.command()
@@ -456,34 +430,18 @@ def normalise(source: Path, output: Path | None, package_name: str, test_name: s
     broken ones), as the runner does after every test; for tests that did not run
     through it. Exits 1 when the result reports failures or errors, like `report`.
     """
-    from ros_isolated_test import atomic_file
     from ros_isolated_test.xunit import canonical
 
-    # /dev/null keeps nothing; any other device node, FIFO or socket is never replaced.
-    discard = output is not None and atomic_file.discards(output)
-    kind = None if output is None or discard else atomic_file.special_kind(output)
-    if kind is not None:
-        _normalise_error(f"cannot use -o {output}: it is {kind}; {atomic_file.SPECIAL_FIX}")
-    name = test_name or canonical.test_name_of(source)
-    data, failed = canonical.normalise_file(source, package_name, name)
+    try:
+        data, failed = canonical.normalise_to(source, output, package_name, test_name)
+    except canonical.OutputError as error:
+        # Its output path cannot be used: one line, exit 2.
+        click.echo(f"ros-isolated-test: error: {error}", err=True)
+        sys.exit(2)
     if output is None:
         click.echo(data.decode("utf-8"), nl=False)
-    elif not discard:
-        try:
-            atomic_file.write_atomically(output, data)
-        except OSError as error:  # one that became special meanwhile, a full disk
-            fix = "choose a writable file path"
-            if isinstance(error, atomic_file.NotReplaceableError):
-                fix = atomic_file.SPECIAL_FIX
-            _normalise_error(f"cannot write -o {output}: {error.strerror}; {fix}")
     if failed:
         sys.exit(1)
-
-
-def _normalise_error(message: str) -> NoReturn:
-    """`normalise`'s one-line error: its output path cannot be used (exit 2)."""
-    click.echo(f"ros-isolated-test: error: {message}", err=True)
-    sys.exit(2)
 
 
 def main() -> None:

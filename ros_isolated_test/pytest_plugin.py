@@ -5,7 +5,7 @@ to wrap them. This plugin (entry point ``ros_isolated_test``, off with ``-p
 no:ros_isolated_test`` or ``--no-ros-isolation``) reserves an ID from the machine-wide
 coordinator before collection, puts it and the discovery range into ``os.environ``, and
 holds it until pytest ends; what the tests left running is ended before the release.
-It goes through the runner's own policy, reservation and sweep (runner/session.py), so
+It goes through the runner's own policy, reservation and sweep (runner/isolation.py), so
 a preset ID, DISABLE_ROS_ISOLATION and the pool mean here what they mean there.
 Machine resources (``--ros-isolated-test-resources``, ini ``ros_isolated_test_resources``)
 are held with the ID by the same reservation, for the whole session (each xdist worker).
@@ -31,7 +31,7 @@ import pytest
 TYPE_CHECKING = False  # nothing of the runner is imported until the plugin is active
 if TYPE_CHECKING:
     from ros_isolated_test.runner.environment import Policy
-    from ros_isolated_test.runner.isolation import Held
+    from ros_isolated_test.runner.isolation import Lease
     from ros_isolated_test.runner.settings import Settings
 
 #: Where a worker tells the xdist controller it got no ID (the controller exits with it).
@@ -180,7 +180,7 @@ def _for_each_worker(state: _State, policy: Policy, config_settings: Settings) -
 
 
 def _holding(
-    config: pytest.Config, state: _State, policy: Policy, config_settings: Settings, held: Held
+    config: pytest.Config, state: _State, policy: Policy, config_settings: Settings, held: Lease
 ) -> None:
     """Into os.environ, pytest's header and --junit-xml: the ID and resources now held."""
     from ros_isolated_test.runner import summary

@@ -104,7 +104,7 @@ fi
 
 # What a Jazzy user on Ubuntu 24.04 has, in .venv-distro: ROS 2 Jazzy (the ros extra) and
 # colcon on exactly the setuptools, click, filelock and lxml Ubuntu ships
-# (scripts/ubuntu-24.04-constraints.txt), and NOT this project: tests/test_ros_package.py
+# (scripts/ubuntu-24.04-constraints.txt), and NOT this project: tests/e2e/test_ros_package.py
 # builds it there as a package of a colcon workspace. ROS_ISOLATED_TEST_NO_DISTRO=1 leaves
 # it out (those tests then say they were skipped).
 constraints=scripts/ubuntu-24.04-constraints.txt

@@ -1,5 +1,5 @@
 # Version of the ros_isolated_test CMake package: the version of the Python distribution
-# it ships in (tests/test_cmake_package.py keeps the two equal).
+# it ships in (tests/e2e/test_cmake_package.py keeps the two equal).
 set(PACKAGE_VERSION "0.1.0")
 
 if(PACKAGE_FIND_VERSION_RANGE)

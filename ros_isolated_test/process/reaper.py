@@ -11,6 +11,10 @@ from __future__ import annotations
 import contextlib
 import os
 
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from collections.abc import Container
+
 _PR_SET_CHILD_SUBREAPER = 36
 
 
@@ -50,11 +54,16 @@ def _prctl(option: int, argument: int) -> bool:
         return False
 
 
-def reap_orphans(keep: int | None = None) -> int:
+def reap_orphans(keep: int | None = None, spare: Container[tuple[int, int]] = ()) -> int:
     """Reap every exited child except ``keep`` (the test, whose status the supervisor collects).
 
     Returns how many were reaped. Stops at ``keep``: its status must stay for the supervisor.
+    ``spare``: children of a program embedding the runner (the pytest plugin's pytest),
+    by :attr:`~proc.Stat.key`: their status stays for that program to collect, so the
+    exited ones are found by name in /proc instead of taken as they come.
     """
+    if spare:
+        return _reap_all_but(keep, spare)
     reaped = 0
     while True:
         try:
@@ -66,6 +75,20 @@ def reap_orphans(keep: int | None = None) -> int:
         with contextlib.suppress(ChildProcessError):
             os.waitpid(info.si_pid, 0)
             reaped += 1
+
+
+def _reap_all_but(keep: int | None, spare: Container[tuple[int, int]]) -> int:
+    """Reap each exited child of ours that is neither ``keep`` nor one of ``spare``."""
+    from ros_isolated_test.process import tree
+
+    me, reaped = os.getpid(), 0
+    for process in tree.processes():
+        if process.ppid != me or process.alive or process.pid == keep or process.key in spare:
+            continue
+        with contextlib.suppress(ChildProcessError):
+            if os.waitpid(process.pid, os.WNOHANG)[0]:
+                reaped += 1
+    return reaped
 
 
 def has_children() -> bool:

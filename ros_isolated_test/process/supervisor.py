@@ -112,7 +112,7 @@ def run(
                 # It came while the test was being started, before it could be passed on.
                 tree.signal_tree(test.pid, signals.received)
             try:
-                timed_out = _pump(test, capture, start, timeout, kill_grace, signals)
+                timed_out = _pump(test, capture, start, timeout, kill_grace, signals, others)
             except BaseException:
                 # Whatever went wrong in the runner, the test must not outlive it unseen.
                 tree.signal_tree(test.pid, signal.SIGKILL)
@@ -147,6 +147,7 @@ def _pump(
     timeout: float | None,
     kill_grace: float,
     signals: Signals,
+    others: frozenset[tuple[int, int]],
 ) -> bool:
     """Copy output until the test exited and its output is done; enforce the timeout.
 
@@ -174,7 +175,7 @@ def _pump(
             kill_at = signals.at + kill_grace
         if kill_at is not None and now >= kill_at:
             _signal(test, signal.SIGKILL)
-        reaper.reap_orphans(keep=test.pid)
+        reaper.reap_orphans(keep=test.pid, spare=others)
         exited = test.poll() is not None
         if exited and drain_until is None:
             drain_until = now + DRAIN_LIMIT_SECONDS

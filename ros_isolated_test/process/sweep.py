@@ -39,7 +39,8 @@ def existing_children() -> frozenset[tuple[int, int]]:
     """
     if not reaper.has_children():
         return frozenset()
-    return frozenset(process.key for process in tree.descendants(os.getpid()))
+    # Exited ones too: their status is the embedding program's to collect, never ours.
+    return frozenset(process.key for process in tree.descendants(os.getpid(), zombies=True))
 
 
 def survivors() -> list[proc.Stat]:
@@ -67,7 +68,7 @@ class _Sweep:
 
     def look(self) -> tuple[list[proc.Stat], list[proc.Stat]]:
         """Reap, then the living tree and the processes in it not met before."""
-        reaper.reap_orphans()
+        reaper.reap_orphans(spare=self.others)
         if not reaper.has_children():
             # Every living descendant has a living child of ours above it (orphans are
             # re-parented to us, the subreaper): none at all means nothing is left.
@@ -82,7 +83,7 @@ class _Sweep:
         """Whether the tree is gone for sure, not only missing from one racy pass."""
         if current:
             return False
-        reaper.reap_orphans()
+        reaper.reap_orphans(spare=self.others)
         return not reaper.has_children() or not _children_left(self.me, self.others)
 
     def terminate(self, grace: float) -> list[proc.Stat]:
@@ -167,7 +168,7 @@ def end_leftovers(
     if not sweep.empty(remaining):
         sweep.freeze()
         left = sweep.kill()
-    reaper.reap_orphans()
+    reaper.reap_orphans(spare=others)
     alive = {process.key for process in left}
     ended = [process for key, process in sweep.seen.items() if key not in alive]
     named = [process.describe() for process in ended[:NAMED_LIMIT]]

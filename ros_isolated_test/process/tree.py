@@ -22,11 +22,14 @@ def processes() -> list[proc.Stat]:
     return found
 
 
-def descendants(pid: int, skip: Container[tuple[int, int]] = ()) -> list[proc.Stat]:
+def descendants(
+    pid: int, skip: Container[tuple[int, int]] = (), zombies: bool = False
+) -> list[proc.Stat]:
     """Every living descendant of ``pid``, parents before children (zombies left out).
 
     Processes whose :attr:`~proc.Stat.key` is in ``skip`` are left out with their own
     descendants (what a program embedding the runner started before the test).
+    ``zombies``: exited ones too, whose status their parent has yet to collect.
     """
     children: dict[int, list[proc.Stat]] = {}
     for process in processes():
@@ -38,7 +41,7 @@ def descendants(pid: int, skip: Container[tuple[int, int]] = ()) -> list[proc.St
     while index < len(queue):  # breadth first: parents before children
         current = queue[index]
         index += 1
-        if current.alive:
+        if current.alive or zombies:
             found.append(current)
         queue.extend(children.get(current.pid, ()))
     return found
@@ -61,7 +64,15 @@ def signal_all(targets: list[proc.Stat], signum: int) -> list[proc.Stat]:
 
 
 def signal_tree(pid: int, signum: int) -> None:
-    """Send ``signum`` to ``pid`` and every descendant."""
+    """Send ``signum`` to ``pid`` and every descendant.
+
+    The descendants are found before ``pid`` is signalled: if it dies at once, its
+    children are orphans at once, out of a tree scanned after. Looked for again after,
+    for any it started meanwhile.
+    """
+    found = descendants(pid)
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.kill(pid, signum)
-    signal_all(descendants(pid), signum)
+    known = {process.key for process in found}
+    found += [process for process in descendants(pid) if process.key not in known]
+    signal_all(found, signum)

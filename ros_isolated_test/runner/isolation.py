@@ -27,8 +27,12 @@ if TYPE_CHECKING:
     from ros_isolated_test.runner import environment, settings
 
 
-class Held:
-    """The ID held for the work, and what of the work's processes outlived it."""
+class Lease:
+    """What the work holds while it runs: its ID and resources, the wait for them, its survivors.
+
+    Not a record in the lock directory (``records``, ``resource_holds.Hold``) nor what
+    releases it (``Reservation``, ``ResourceHold``): the run's own view of what it holds.
+    """
 
     __slots__ = ("domain_id", "reserved", "resources", "survivors", "waited", "waited_resources")
 
@@ -67,8 +71,8 @@ def isolation(
     command: Sequence[str],
     note: Callable[[str], None],
     sweep_grace: float | None = None,
-) -> Iterator[Held | None]:
-    """Hold a domain ID for the ``with`` block (None: isolation disabled), then release it.
+) -> Iterator[Lease | None]:
+    """Hold a domain ID for the ``with`` block (a :class:`Lease`; None: no isolation), then release.
 
     With ``sweep_grace`` (work that ran in this process, the pytest plugin) this process
     adopts orphans for the block, and after it the supervisor's sweep ends every process
@@ -139,15 +143,15 @@ def _take(
     config: settings.Settings,
     command: Sequence[str],
     note: Callable[[str], None],
-) -> tuple[Held, _Taken]:
+) -> tuple[Lease, _Taken]:
     """Reserve what the run needs: an ID (waiting, unless in namespaces), the resources."""
     coordinator = DomainCoordinator(config.lock_dir, config.pool, config.resources, config.capacity)
     if not policy.isolate:
         hold = coordinator.hold_resources(command, config.wait_timeout, note)
-        return Held(None, config.resources, hold.waited, hold.waited_resources), _Taken(hold)
+        return Lease(None, config.resources, hold.waited, hold.waited_resources), _Taken(hold)
     if not policy.namespaces:
         taken = coordinator.acquire(command, config.wait_timeout, note)
-        held = Held(taken.domain_id, config.resources, taken.waited, taken.waited_resources)
+        held = Lease(taken.domain_id, config.resources, taken.waited, taken.waited_resources)
         return held, _Taken(taken)
     parts = _Taken()
     waited = (0.0, 0.0)
@@ -162,12 +166,12 @@ def _take(
         raise
     if reservation is None:
         # Any ID will do in a network of its own: the pool's first, said to be shared.
-        return Held(config.pool[0], config.resources, *waited, reserved=False), parts
+        return Lease(config.pool[0], config.resources, *waited, reserved=False), parts
     parts.parts.append(reservation)
-    return Held(reservation.domain_id, config.resources, *waited), parts
+    return Lease(reservation.domain_id, config.resources, *waited), parts
 
 
-def _block_survivors(taken: _Taken, held: Held, note: Callable[[str], None]) -> None:
+def _block_survivors(taken: _Taken, held: Lease, note: Callable[[str], None]) -> None:
     """What of the work's tree still lives keeps the ID and the resources until it is gone.
 
     Not ours to kill, or stuck in the kernel. The supervisor's own list when it returned

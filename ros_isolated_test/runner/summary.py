@@ -12,7 +12,7 @@ from ros_isolated_test.runner import environment, partition
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from ros_isolated_test.runner import settings
-    from ros_isolated_test.runner.isolation import Held
+    from ros_isolated_test.runner.isolation import Lease
 
 #: The suite property holding the settings' notes (IDs left out of the default pool, ...).
 SETTINGS_NOTES = "settings_notes"
@@ -42,7 +42,7 @@ def header_line(policy: environment.Policy, domain_id: int, reserved: bool = Tru
     return line
 
 
-def resources_summary(held: Held, config: settings.Settings) -> tuple[str, dict[str, str]]:
+def resources_summary(held: Lease, config: settings.Settings) -> tuple[str, dict[str, str]]:
     """The line saying what the test holds besides its ID, and the properties recording it."""
     from ros_isolated_test.domain_coordinator.resources import describe
 

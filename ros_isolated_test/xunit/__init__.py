@@ -3,6 +3,8 @@
 ``model`` (cases and suites), ``reader`` (hostile-safe streaming read, by stage:
 ``sanitiser`` and ``markup``, ``safe_parser``, ``builder``, into the ``raw`` model),
 ``normalise`` (per-producer fixes), ``validate`` (render and check against ``schemas/junit.xsd``),
-``serialise`` (the bytes, without lxml), ``result_file`` (one test's file through its
-life), ``report`` (summaries of many files).
+``serialise`` (the bytes, without lxml), ``attempts`` and ``gitlab`` (reruns merged,
+GitLab's rules), ``result_file`` (one test's file through its life, with ``placeholder``
+and ``timeline``), ``canonical`` (any file made canonical), ``report`` and ``html_*``
+(summaries of many files, and their page).
 """

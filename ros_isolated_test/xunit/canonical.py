@@ -2,12 +2,14 @@
 
 Apart from one test's file through its life (``result_file``): the runner adopts the
 file its test wrote, and ``ros-isolated-test normalise`` rewrites a file nobody ran
-here; both read it the same way. The reader, and lxml behind it, are imported only
-when a file is read: a test that wrote no file of its own never loads them.
+here (:func:`normalise_to`); both read it the same way. The reader, and lxml behind it,
+are imported only when a file is read: a test that wrote no file of its own never loads
+them.
 """
 
 from __future__ import annotations
 
+from ros_isolated_test import atomic_file
 from ros_isolated_test.xunit import validate
 from ros_isolated_test.xunit.model import Suite
 
@@ -54,3 +56,32 @@ def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, boo
     )
     rendered = validate.render(suite)
     return rendered.data, rendered.failed
+
+
+class OutputError(Exception):
+    """The canonical file cannot be written where asked: the one-line error, with the fix."""
+
+
+def normalise_to(
+    source: Path, output: Path | None, package: str, test_name: str | None = None
+) -> tuple[bytes, bool]:
+    """``normalise``: ``source`` canonical, written to ``output``; (its bytes, whether it failed).
+
+    ``output`` None: written nowhere (the caller prints it); /dev/null keeps nothing; any
+    other device node, FIFO or socket is never replaced (:class:`OutputError`, before
+    ``source`` is read). ``test_name`` defaults to the one ``source``'s name gives.
+    """
+    discard = output is not None and atomic_file.discards(output)
+    kind = None if output is None or discard else atomic_file.special_kind(output)
+    if kind is not None:
+        raise OutputError(f"cannot use -o {output}: it is {kind}; {atomic_file.SPECIAL_FIX}")
+    data, failed = normalise_file(source, package, test_name or test_name_of(source))
+    if output is not None and not discard:
+        try:
+            atomic_file.write_atomically(output, data)
+        except OSError as error:  # one that became special meanwhile, a full disk
+            fix = "choose a writable file path"
+            if isinstance(error, atomic_file.NotReplaceableError):
+                fix = atomic_file.SPECIAL_FIX
+            raise OutputError(f"cannot write -o {output}: {error.strerror}; {fix}") from None
+    return data, failed

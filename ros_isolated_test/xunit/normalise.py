@@ -1,7 +1,7 @@
 """Turning what a test left behind into canonical test cases.
 
 Each producer gets something wrong for some reader (a real sample of each is in
-tests/data/xunit; tests/test_normalise_samples.py says what is odd in it); the fixes
+tests/data/xunit; tests/e2e/test_normalise_samples.py says what is odd in it); the fixes
 are generic where they can be and keyed to a producer's shape where not: gtest's
 nameless ad-hoc failures and ``"0."`` times, pytest's duplicate cases, launch_testing's
 text-only-in-message, xmlrunner's timestamped suite names, ctest's missing ``errors``

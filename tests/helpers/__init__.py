@@ -1,17 +1,25 @@
 """Shared test helpers: one module per job, imported by test modules as ``from helpers...``.
 
-Among them: commands (where the CLI and RUNNER are, running them), results (reading
-result files), canonical (what a canonical result file is), domains (picking free IDs),
-processes (child processes of a test), workspace (the example colcon package, built once
-per session), cmake_package and launch_env (the CMake package's and the launch tier's
-builds), peak_rss (a child's memory, never charged with pytest's), distros (the Jazzy and
-Kilted venvs, and the environment a sourced setup of each gives), overlap (runners started
-at once, proving no two held one ID), readers (how colcon, xunit-viewer, junitparser,
-GitLab and Jenkins read a result file), docker_engine (a real Docker engine, the stand-in
-base and the project's image, built once), chromium (headless Chromium: a page's DOM, a
-screenshot, every request counted), result_tree (a large results tree, made quickly),
-imports (the package's import graph from its source: circles, imports against the
-layers), capabilities (the only way to skip). Test modules import from here, never from each
-other and never from ``conftest``, which holds fixtures only. The other ``*.py`` here are
-programs the tests run as processes (talkers, listeners, gate).
+Test modules import from here, never from each other and never from ``conftest``, which
+holds fixtures only. Each module's docstring says its job; by kind:
+
+- Running our programs: commands (where the CLI and the RUNNER are, running them),
+  cli_runs, partition_runs, reruns, pytest_sessions (real pytest sessions for the
+  plugin), launch_runs and launch_files (launch files under pytest, colcon and ctest).
+- Reading what a run left: results, canonical, xunit (suites made in code, read back),
+  output_capture, report_page, consumers (how colcon, xunit-viewer, junitparser, GitLab
+  and Jenkins read a result file), jenkins_junit10.
+- IDs and the machine: domains (picking free IDs), busy_machine (the scene of other ROS
+  work for a session), coordinator and holding (holding IDs in other processes),
+  hostile_lock_dir, overlap, resource_probe, namespaces, tiny_disk, survivors,
+  processes and process_tree (a test's child processes, always ended), peak_rss.
+- Builds, made once per session: workspace (the example colcon package), cmake_package,
+  ros_package, launch_env, distros (the Jazzy and Kilted venvs), docker_engine,
+  result_tree, chromium (headless Chromium: a page's DOM, a screenshot, every request).
+- The repository itself: docs, imports (the import graph: circles, imports against the
+  layers), layout (where each test lives).
+- capabilities: the only way to skip.
+
+The other modules here are programs the tests run as processes (crowd_probe,
+daemon_talker, gate, gz_probe, host_talker, listener, token_exchange, token_listener).
 """

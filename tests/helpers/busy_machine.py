@@ -233,10 +233,10 @@ class Scene:
         coordinator may bind the port of the ID the scene's node chose meanwhile, and
         the ID is then listed as "port", in use all the same.
         """
-        from ros_isolated_test.domain_coordinator import held_domains
+        from ros_isolated_test.domain_coordinator import domain_uses
 
         lock_dir = lock_dir_from_env({})
-        seen = {item.domain_id for item in held_domains(lock_dir, parse_pool("1-232"))}
+        seen = {item.domain_id for item in domain_uses(lock_dir, parse_pool("1-232"))}
         missing = {(held.domain_id, held.via) for held in self.held if held.domain_id not in seen}
         if missing:
             raise RuntimeError(f"busy machine: not in use as it should be: {missing}")

@@ -123,10 +123,15 @@ def ament(
     *options: str,
     cwd: Path,
     package: str = "pkg",
+    tools: Tools | None = None,
 ) -> subprocess.CompletedProcess[str]:
-    """``python3 -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest runs it."""
+    """``python3 -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest runs it.
+
+    With ``tools``, the interpreter is that distro's; else the suite's.
+    """
     args = ament_args(result, command, *options, package=package)
-    return run_runner(runner_script, args, env, cwd=cwd)
+    runner = run_runner if tools is None else tools.run_runner
+    return runner(runner_script, args, env, cwd=cwd)
 
 
 def normalise(source: Path, output: Path, env: Mapping[str, str], package: str) -> None:

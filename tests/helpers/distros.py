@@ -189,20 +189,6 @@ class Tools:
         """``ros-isolated-test ARGS`` from this venv (``env`` is taken as given)."""
         return commands.run_process([self.cli, *args], env, **kwargs)
 
-    def ament(
-        self,
-        runner_script: str,
-        result: Path,
-        command: Sequence[str],
-        env: Mapping[str, str],
-        *options: str,
-        cwd: Path,
-        package: str = "pkg",
-    ) -> subprocess.CompletedProcess[str]:
-        """``PYTHON -u RUNNER RESULT --package-name P OPTIONS --command CMD``, as ctest does."""
-        args = commands.ament_args(result, command, *options, package=package)
-        return self.run_runner(runner_script, args, env, cwd=cwd)
-
     def run_runner(
         self, runner_script: str, args: Sequence[str], env: Mapping[str, str], **kwargs: object
     ) -> subprocess.CompletedProcess[str]:

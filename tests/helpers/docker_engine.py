@@ -1,6 +1,6 @@
 """A real Docker engine for the container tier: dockerd when needed, the images built once.
 
-The tier (tests/test_docker_engine.py) runs the project's image as users run it. No image
+The tier (tests/e2e/test_docker_engine.py) runs the project's image as users run it. No image
 registry is reachable from the test machines, so everything comes from here:
 
 - The engine: one that answers at ``DOCKER_HOST`` (or the CLI's default socket) is used

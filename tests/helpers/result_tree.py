@@ -18,7 +18,7 @@ from ros_isolated_test.domain_coordinator.pool import id_ranges
 from ros_isolated_test.xunit import serialise
 from ros_isolated_test.xunit.attempts import merge_attempts
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
-from ros_isolated_test.xunit.result_file import instant, timeline_properties
+from ros_isolated_test.xunit.timeline import instant, timeline_properties
 
 #: When the made-up run starts (seconds since the epoch): any fixed time will do.
 START = 1_790_000_000.0

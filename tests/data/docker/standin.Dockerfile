@@ -1,4 +1,4 @@
-# A stand-in for ros:jazzy-ros-base, for the real-engine tests (tests/test_docker_engine.py):
+# A stand-in for ros:jazzy-ros-base, for the real-engine tests (tests/e2e/test_docker_engine.py):
 # no image registry is reachable from the test machines, so ROS 2 Jazzy comes from PyPI
 # wheels and the root file system from debootstrap (tests/helpers/docker_engine.py makes
 # both). What the project's Dockerfile relies on is what it mimics: /ros_entrypoint.sh,

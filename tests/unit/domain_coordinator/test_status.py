@@ -1,0 +1,240 @@
+"""``status``: every domain ID in use on this machine, by what, and who waits, read once.
+
+An ID is in use when a runner holds its lock (in any pool: other users' runners may use
+pools of their own), when something binds its TCP port (upstream's coordinator, even
+before any runner made the lock directory), when a DDS participant binds its UDP ports,
+when a process carries it in ROS_DOMAIN_ID (a squatter; a runner's own test is none),
+or while a survivor of its last test lives: listed once, as a survivor. Runners queued
+for an ID are listed apart, in their order. Real holders, waiters, squatters and
+survivors throughout; how the table draws it: ``unit/runner/test_status_table``.
+"""
+
+from __future__ import annotations
+
+import getpass
+import os
+import pwd
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from helpers import capabilities
+from helpers.commands import HUNG, run_cli, start_cli
+from helpers.coordinator import (
+    UPSTREAM_SCRIPT,
+    status_rows,
+    wait_for_environment,
+    without_domain_id,
+)
+from helpers.domains import free_ids
+from helpers.hostile_lock_dir import make_shared_lock_dir
+from helpers.processes import Children, poll_until, user_keywords
+from helpers.survivors import alive_with, build_setuid_helper, tagged
+
+from ros_isolated_test.domain_coordinator import (
+    LOCK_DIR_ENV,
+    POOL_ENV,
+    DomainCoordinator,
+    DomainUse,
+    domain_uses,
+)
+
+#: A user ID nobody has here.
+UNNAMED = 4242
+NOBODY = 65534
+
+
+def test_status_lists_a_waiting_runner_with_its_pid_user_command_and_place(
+    one_id: dict[str, str], tmp_path: Path, started: list[subprocess.Popen[bytes]]
+) -> None:
+    holder = start_cli(["run", "--", "sleep", "60"], one_id, tmp_path / "holder.log", started)
+    poll_until(
+        lambda: any(row.get("pid") == holder.pid for row in status_rows(one_id)),
+        "the holder never held the ID",
+    )
+    # Control: one runner holds, nobody waits.
+    assert [row for row in status_rows(one_id) if row["via"] == "queue"] == []
+    assert "Waiting for a domain ID" not in run_cli(["status"], one_id).stdout
+
+    waiter = start_cli(
+        ["run", "--wait-timeout", "120", "--", "echo", "waiter-marker"],
+        one_id,
+        tmp_path / "waiter.log",
+        started,
+    )
+
+    def queued() -> list[dict[str, object]]:
+        assert waiter.poll() is None, (tmp_path / "waiter.log").read_text()
+        return [row for row in status_rows(one_id) if row["via"] == "queue"]
+
+    poll_until(lambda: bool(queued()), "the waiting runner never showed in status --json")
+    (row,) = queued()
+    assert row["pid"] == waiter.pid
+    assert row["position"] == 1
+    assert row["domain_id"] is None
+    assert row["user"] == getpass.getuser()
+    assert "echo waiter-marker" in str(row["command"])
+    assert isinstance(row["started"], float) and row["started"] <= time.time()
+    held = [row for row in status_rows(one_id) if row["via"] == "lock"]
+    assert [item["pid"] for item in held] == [holder.pid]  # held rows keep their shape
+
+    table = run_cli(["status"], one_id).stdout
+    assert "Waiting for a domain ID" in table, table
+    waiting = table.split("Waiting for a domain ID", 1)[1].splitlines()
+    line = next(item for item in waiting if f" {waiter.pid} " in item)
+    assert line.split()[0] == "1"
+    assert "echo waiter-marker" in line
+
+    # The holder ends: the waiter gets the ID, runs, and leaves the queue.
+    holder.send_signal(signal.SIGTERM)
+    assert waiter.wait(HUNG) == 0, (tmp_path / "waiter.log").read_text()
+    assert "waiter-marker" in (tmp_path / "waiter.log").read_text()
+    assert [row for row in status_rows(one_id) if row["via"] == "queue"] == []
+
+
+def test_status_lists_an_id_held_outside_the_callers_pool(
+    lock_dir: Path, env: dict[str, str]
+) -> None:
+    """Another user's runner may have a pool of its own; its IDs are still held here."""
+    (domain_id,) = free_ids(1)
+    with DomainCoordinator(lock_dir, (domain_id,)).reserve(["other_pool_test"]):
+        listed = status_rows(env)  # the default pool, 1-101
+    rows = [row for row in listed if row["via"] == "lock"]
+    assert [(row["domain_id"], row["pid"]) for row in rows] == [(domain_id, os.getpid())]
+
+
+def test_status_lists_upstream_holders_before_any_runner_made_the_lock_dir(
+    lock_dir: Path, env: dict[str, str], children: Children
+) -> None:
+    # Upstream's first free ID, and no squatter's (upstream does not look): status must
+    # name upstream's port alone.
+    upstream = children.python(UPSTREAM_SCRIPT, *free_ids(1, range(1, 101)))
+    upstream_id = int(children.first_line(upstream))
+    missing = lock_dir / "not-made-yet"
+    assert domain_uses(missing, (upstream_id,)) == [DomainUse(upstream_id, "port", None)]
+    env[LOCK_DIR_ENV] = str(missing)
+    env[POOL_ENV] = str(upstream_id)
+    assert status_rows(env) == [{"domain_id": upstream_id, "via": "port"}]
+    assert not missing.exists()
+
+
+def test_a_holders_own_test_is_no_squatter_but_a_strangers_process_is(
+    lock_dir: Path, children: Children
+) -> None:
+    """The holder's test carries the ID in ROS_DOMAIN_ID too: it is the holder's, not listed.
+
+    The control, on the same ID at the same time: a process no holder started (orphaned,
+    its parent shell gone) with the same variable is listed as a squatter.
+    """
+    (domain_id,) = free_ids(1)
+    env = {**without_domain_id(), "ROS_DOMAIN_ID": str(domain_id)}
+    with DomainCoordinator(lock_dir, (domain_id,)).reserve(["holder"]):
+        own_test = children.start(["sleep", "600"], env=env)
+        wait_for_environment(own_test.pid, domain_id)
+        orphan = subprocess.run(
+            ["sh", "-c", "sleep 600 >/dev/null 2>&1 & echo $!"],
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        stranger = int(orphan.stdout)
+        try:
+            wait_for_environment(stranger, domain_id)
+            uses = domain_uses(lock_dir, (domain_id,))
+        finally:
+            os.kill(stranger, signal.SIGKILL)
+    named = [(use.via, use.holder.pid if use.holder else None) for use in uses]
+    assert named == [("lock", os.getpid()), ("environment", stranger)]
+
+
+@capabilities.ROOT
+def test_a_squatter_of_a_user_passwd_does_not_name_shows_its_uid(
+    one_id: dict[str, str], started: list[subprocess.Popen[bytes]]
+) -> None:
+    """As a record or a ticket shows its user: the numeric UID (containers), not "?"."""
+    with pytest.raises(KeyError):
+        pwd.getpwuid(UNNAMED)  # the control: nobody has this UID here
+    domain_id = one_id["ROS_ISOLATED_TEST_DOMAINS"]
+    squatter = subprocess.Popen(["sleep", "600"], env={"ROS_DOMAIN_ID": domain_id}, user=UNNAMED)
+    started.append(squatter)
+    (row,) = [row for row in status_rows(one_id) if row["pid"] == squatter.pid]
+    assert (row["via"], row["domain_id"], row["user"]) == ("environment", int(domain_id), "4242")
+
+
+def _lines_naming(text: str, pid: int) -> list[list[str]]:
+    """The ``status`` table rows (split in words) whose PID column is ``pid``."""
+    return [line.split() for line in text.splitlines() if line.split()[2:3] == [str(pid)]]
+
+
+@capabilities.SETUID_HELPER
+def test_a_survivor_is_listed_once_as_a_survivor_and_a_plain_squatter_as_a_squatter(
+    traversable_dir: Path, env: dict[str, str], started: list[subprocess.Popen[bytes]]
+) -> None:
+    """A survivor still has the ID in ROS_DOMAIN_ID, so the squatter scan found it as well:
+    ``status``, the waiting line and the refusal named the same PID as squatter and as
+    survivor. The control, beside it on the same ID: a plain process with ROS_DOMAIN_ID
+    set (never a test) is still a squatter."""
+    helper = build_setuid_helper(traversable_dir)
+    locks = make_shared_lock_dir(traversable_dir)
+    (domain_id,) = free_ids(1)
+    runner_env = {
+        **env,
+        "ROS_ISOLATED_TEST_LOCK_DIR": str(locks),
+        "ROS_ISOLATED_TEST_DOMAINS": str(domain_id),
+        "HOME": "/nonexistent",
+        "USER": "nobody",
+    }
+    with tagged() as tag:
+        # A runner run as nobody cannot end its test's setuid-root child: a real survivor,
+        # which keeps the ROS_DOMAIN_ID its runner gave it.
+        done = run_cli(
+            ["run", "--kill-grace", "0.5", "--", str(helper), tag],
+            runner_env,
+            **user_keywords(NOBODY),
+        )
+        assert done.returncode == 0, done.stdout + done.stderr
+        (survivor,) = alive_with(tag)
+        assert f"stays blocked while {survivor} (setuid_helper)" in done.stdout, done.stdout
+        environ = Path(f"/proc/{survivor}/environ").read_bytes().split(b"\0")
+        assert f"ROS_DOMAIN_ID={domain_id}".encode() in environ
+        squatter = subprocess.Popen(
+            ["sleep", tag], env={"ROS_DOMAIN_ID": str(domain_id)}, cwd=traversable_dir
+        )
+        started.append(squatter)
+
+        rows = [row for row in status_rows(runner_env) if row["domain_id"] == domain_id]
+        survivor_rows = [row["via"] for row in rows if row.get("pid") == survivor]
+        squatter_rows = [row["via"] for row in rows if row.get("pid") == squatter.pid]
+        assert (survivor_rows, squatter_rows) == (["survivor"], ["environment"]), rows
+
+        table = run_cli(["status"], runner_env).stdout
+        assert [words[:2] for words in _lines_naming(table, survivor)] == [
+            [str(domain_id), "survivor"]
+        ], table
+        assert [words[:2] for words in _lines_naming(table, squatter.pid)] == [
+            [str(domain_id), "squatter"]
+        ], table
+
+        # The waiting line and the refusal name who holds the pool: each process once.
+        waiter = start_cli(
+            ["run", "--wait-timeout", "120", "--", "true"],
+            runner_env,
+            traversable_dir / "waiter.log",
+            started,
+        )
+        log = traversable_dir / "waiter.log"
+        poll_until(lambda: "waiting for a free ROS_DOMAIN_ID" in log.read_text(), "no waiting")
+        refused = run_cli(["run", "--wait-timeout", "0", "--", "true"], runner_env)
+        assert refused.returncode == 3, refused.stdout + refused.stderr
+        (waiting,) = [line for line in log.read_text().splitlines() if "waiting for" in line]
+        for said in (waiting, refused.stdout + refused.stderr):
+            assert said.count(f"pid {survivor} ") == 1, said
+            assert f"{domain_id}: survivor pid {survivor} (root)" in said, said
+            assert f"{domain_id}: squatter pid {squatter.pid} " in said, said
+    # Once the survivor is gone, the waiter gets the ID (a clean release: squatters of it
+    # do not block it).
+    assert waiter.wait(HUNG) == 0, log.read_text()
+    assert f"Running with ROS_DOMAIN_ID {domain_id}" in log.read_text()

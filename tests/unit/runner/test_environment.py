@@ -1,0 +1,316 @@
+"""``environment``: the test's environment, and whether isolation may go ahead at all.
+
+A preset ROS_DOMAIN_ID is refused, in the shell ``run`` and in the ctest RUNNER alike.
+Upstream silently runs on a preset ID; we refuse, because an exported ID turns a parallel
+run into crosstalk nobody notices. DISABLE_ROS_ISOLATION=1 is the documented way out, and
+it counts wherever the test's environment gets it (the runner's own environment, or
+``--env``, ament_add_test's ENV, which has the last word). The refusal runs on each
+supported distro (the ``tools`` fixture); it matters most on Kilted, whose upstream runner
+silently replaces a preset ID instead. In process: the policy itself (the unset control
+of every refusal, the mark of an ID held for us, ``--append-env``, what never reaches the
+test, namespaces that contradict the test's discovery). The Gazebo partition's half of
+the policy is in test_environment_partition.py.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from helpers.commands import (
+    ERROR_PREFIX,
+    MODES,
+    ament,
+    the_error_line,
+    through,
+)
+from helpers.distros import Tools
+from helpers.results import load_result
+
+from ros_isolated_test.runner import environment, settings
+from ros_isolated_test.runner.environment import DOMAIN_VAR, HELD_VAR, RefusedError
+from ros_isolated_test.runner.request import EnvAssignment
+
+WARNING = "WARNING: DISABLE_ROS_ISOLATION is set"
+#: Writes the domain the test saw, so a test can tell it ran and where.
+SEEN = ("sh", "-c", 'echo "${ROS_DOMAIN_ID-unset}" > seen')
+
+
+# --- a preset ROS_DOMAIN_ID, as users meet it: run and the RUNNER ----------------------------
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("value", ["5", ""], ids=["set", "empty"])
+def test_preset_domain_id_is_refused_and_nothing_runs(
+    tools: Tools,
+    distro_runner_script: str,
+    distro_env: dict[str, str],
+    tmp_path: Path,
+    mode: str,
+    value: str,
+) -> None:
+    env = distro_env
+    env["ROS_DOMAIN_ID"] = value
+    proc = through(mode, distro_runner_script, env, tmp_path, ["touch", "ran"], tools=tools)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists(), "a refused test must not run"
+    assert "Running with ROS_DOMAIN_ID" not in proc.stdout
+    line = the_error_line(proc)
+    assert f"ROS_DOMAIN_ID is already set to {value!r}" in line
+    assert "share that domain" in line, "the message must say why"
+    assert "unset ROS_DOMAIN_ID" in line, "the message must name the way out"
+    assert "DISABLE_ROS_ISOLATION=1" in line
+    if not value:
+        assert "domain 0" in line
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_refusal_is_recorded_in_the_result_file_as_a_failed_case(
+    tools: Tools, distro_runner_script: str, distro_env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env = distro_env
+    env["ROS_DOMAIN_ID"] = "17"
+    result = tmp_path / "out" / "pkg" / "t.xml"
+    proc = through(
+        mode, distro_runner_script, env, tmp_path, ["touch", "ran"], result=result, tools=tools
+    )
+    assert proc.returncode == 2
+    assert not (tmp_path / "ran").exists()
+    message = the_error_line(proc).removeprefix(ERROR_PREFIX)
+    case = load_result(result).only
+    assert case.outcome == "failure"
+    assert case.message == message
+    assert "ROS_DOMAIN_ID is already set to '17'" in case.text
+
+
+@pytest.mark.parametrize("option", ["--env", "--append-env"])
+def test_domain_id_passed_with_env_option_is_refused(
+    runner_script: str, env: dict[str, str], tmp_path: Path, option: str
+) -> None:
+    result = tmp_path / "pkg" / "t.xml"
+    proc = through(
+        "runner",
+        runner_script,
+        env,
+        tmp_path,
+        ["touch", "ran"],
+        result=result,
+        runner_options=[option, "ROS_DOMAIN_ID=7"],
+    )
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists()
+    line = the_error_line(proc)
+    assert "ROS_DOMAIN_ID='7'" in line
+    assert "--env" in line
+    assert "DISABLE_ROS_ISOLATION=1" in line
+    case = load_result(result).only
+    assert case.outcome == "failure"
+    assert case.message == line.removeprefix(ERROR_PREFIX)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_disable_ros_isolation_runs_with_the_preset_id_and_warns(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    env["ROS_DOMAIN_ID"] = "42"
+    env["DISABLE_ROS_ISOLATION"] = "1"
+    result = tmp_path / "pkg" / "t.xml"
+    proc = through(
+        mode, runner_script, env, tmp_path, ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"'], result
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "seen=42\n" in proc.stdout
+    assert "Running with ROS_DOMAIN_ID" not in proc.stdout
+    warnings = [line for line in proc.stdout.splitlines() if "WARNING" in line]
+    assert len(warnings) == 1, proc.stdout
+    assert "ROS_DOMAIN_ID=42" in warnings[0]
+    assert "WITHOUT isolation" in warnings[0]
+    summary = load_result(result)
+    assert summary.only.outcome == "passed"
+    assert summary.properties["ros_domain_id"] == "42"
+
+
+def test_disable_ros_isolation_lets_env_option_set_the_id(
+    runner_script: str, env: dict[str, str], tmp_path: Path
+) -> None:
+    env["DISABLE_ROS_ISOLATION"] = "1"
+    proc = through(
+        "runner",
+        runner_script,
+        env,
+        tmp_path,
+        ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"'],
+        runner_options=["--env", "ROS_DOMAIN_ID=7"],
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "seen=7\n" in proc.stdout
+    assert any("WARNING" in line and "ROS_DOMAIN_ID=7" in line for line in proc.stdout.splitlines())
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("word", ["0", "false"])
+def test_disable_ros_isolation_0_does_not_disable(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str, word: str
+) -> None:
+    env["DISABLE_ROS_ISOLATION"] = word
+    env["ROS_DOMAIN_ID"] = "5"
+    proc = through(mode, runner_script, env, tmp_path, ["touch", "ran"])
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert not (tmp_path / "ran").exists()
+    assert "ROS_DOMAIN_ID is already set to '5'" in the_error_line(proc)
+
+    del env["ROS_DOMAIN_ID"]
+    isolated = through(
+        mode, runner_script, env, tmp_path, ["sh", "-c", 'echo "seen=$ROS_DOMAIN_ID"']
+    )
+    assert isolated.returncode == 0, isolated.stdout + isolated.stderr
+    first = isolated.stdout.splitlines()[0]
+    assert first.startswith("Running with ROS_DOMAIN_ID ")
+    assert f"seen={first.split()[3]}\n" in isolated.stdout
+    assert "WARNING" not in isolated.stdout
+
+
+# --- DISABLE_ROS_ISOLATION wherever the test's environment gets it ------------------------
+
+
+@pytest.mark.parametrize(
+    ("how", "runs"),
+    [
+        ("--env", True),  # ament_add_test(... ENV DISABLE_ROS_ISOLATION=1)
+        ("environment", True),  # the runner's own environment
+        ("neither", False),  # control: a preset ID is refused
+        ("--env says no", False),  # the assignment has the last word over the environment
+    ],
+)
+def test_disable_ros_isolation_counts_wherever_the_tests_environment_gets_it(
+    env: dict[str, str], runner_script: str, tmp_path: Path, how: str, runs: bool
+) -> None:
+    options = ["--env", "ROS_DOMAIN_ID=42"]
+    if how == "--env":
+        options += ["--env", "DISABLE_ROS_ISOLATION=1"]
+    elif how == "environment":
+        env["DISABLE_ROS_ISOLATION"] = "1"
+    elif how == "--env says no":
+        env["DISABLE_ROS_ISOLATION"] = "1"
+        options += ["--env", "DISABLE_ROS_ISOLATION=0"]
+    result = tmp_path / "pkg" / "t.xml"
+    options.append("--generate-result-on-success")
+    proc = ament(runner_script, result, SEEN, env, *options, cwd=tmp_path)
+    summary = load_result(result)
+    if not runs:
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert not (tmp_path / "seen").exists()
+        assert "DISABLE_ROS_ISOLATION=1" in proc.stderr
+        assert summary.only.outcome in ("error", "failure")
+        return
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (tmp_path / "seen").read_text().strip() == "42"
+    assert WARNING in proc.stdout  # loudly, as the environment variable does
+    if how == "--env":
+        assert "(by --env" in proc.stdout
+    assert summary.properties.get("isolation") == "disabled"
+    assert summary.only.outcome == "passed"
+
+
+# --- the policy, in process ------------------------------------------------------------------
+
+
+def _decide(
+    environ: dict[str, str],
+    assignments: tuple[EnvAssignment, ...] = (),
+    config: settings.Settings | None = None,
+) -> environment.Policy:
+    """The policy for ``environ`` (never this process's own), with settings read from it."""
+    config = settings.read(environ) if config is None else config
+    return environment.decide(assignments, config, environ)
+
+
+@pytest.mark.parametrize("value", ["5", "", " "])
+def test_a_preset_domain_id_is_refused_and_unset_is_the_control(value: str) -> None:
+    with pytest.raises(RefusedError) as refused:
+        _decide({DOMAIN_VAR: value, "OTHER": "kept"})
+    assert refused.value.variable == DOMAIN_VAR
+    message = str(refused.value)
+    assert f"{DOMAIN_VAR} is already set to {value!r}" in message and "\n" not in message
+    assert ("domain 0" in message) is (not value.strip()), message
+    # The control: unset, the test is isolated, on the ID the runner hands it, marked held.
+    policy = _decide({"OTHER": "kept"})
+    assert policy.isolate and DOMAIN_VAR not in policy.env and policy.env["OTHER"] == "kept"
+    env = policy.for_domain(9)
+    assert (env[DOMAIN_VAR], env[HELD_VAR], env["OTHER"]) == ("9", "9", "kept")
+
+
+def test_a_preset_id_is_run_on_only_with_isolation_disabled() -> None:
+    """DISABLE_ROS_ISOLATION: nothing reserved, the ID kept as it is, said loudly."""
+    policy = _decide({DOMAIN_VAR: "42", "DISABLE_ROS_ISOLATION": "1"})
+    assert not policy.isolate and policy.env[DOMAIN_VAR] == "42"
+    (warning,) = policy.notes
+    assert warning.startswith(WARNING) and f"WITHOUT isolation on {DOMAIN_VAR}=42" in warning
+    # An off word is no way out: refused as before.
+    with pytest.raises(RefusedError):
+        _decide({DOMAIN_VAR: "42", "DISABLE_ROS_ISOLATION": "no"})
+
+
+def test_an_id_is_held_for_us_only_when_the_mark_names_that_very_id() -> None:
+    """A pytest started under a runner sees its ID held for it; a plain preset ID is not."""
+    assert environment.held_for_us({DOMAIN_VAR: "5", HELD_VAR: "5"})
+    assert not environment.held_for_us({DOMAIN_VAR: "5"})
+    assert not environment.held_for_us({DOMAIN_VAR: "5", HELD_VAR: "6"})
+    assert not environment.held_for_us({HELD_VAR: "5"})
+
+
+def test_append_env_to_an_unset_or_empty_variable_gives_the_plain_value() -> None:
+    """Upstream's leading separator would put the current directory on the path."""
+    appended = [EnvAssignment("P", "/x", append=True)]
+    for base in ({}, {"P": ""}):
+        env, notes = environment.apply_assignments(base, appended)
+        assert env["P"] == "/x", base
+        assert notes == ["extra environment variables to append:", " - P+=/x"]
+    # The control: a value there gets the separator once, never twice.
+    assert environment.apply_assignments({"P": "/a"}, appended)[0]["P"] == f"/a{os.pathsep}/x"
+    ends = {"P": f"/a{os.pathsep}"}
+    assert environment.apply_assignments(ends, appended)[0]["P"] == f"/a{os.pathsep}/x"
+    # --env sets before --append-env appends, whatever the order given.
+    both = [*appended, EnvAssignment("P", "/set")]
+    assert environment.apply_assignments({}, both)[0]["P"] == f"/set{os.pathsep}/x"
+
+
+def test_the_rerun_count_and_the_resources_never_reach_the_test() -> None:
+    """A runner started inside the test would rerun, or wait for what its parent holds."""
+    environ = {
+        settings.RERUNS_ENV: "2",
+        settings.RESOURCES_ENV: "gpu=1",
+        "OTHER_VARIABLE": "2",
+    }
+    policy = _decide(environ, config=settings.read({}))
+    assert settings.RERUNS_ENV not in policy.env and settings.RESOURCES_ENV not in policy.env
+    assert policy.env["OTHER_VARIABLE"] == "2"  # the control: any other reaches it as it is
+
+
+@pytest.mark.parametrize(
+    ("range_given", "peers", "says"),
+    [
+        ("SUBNET", "", "its discovery range is SUBNET"),
+        (None, "localhost;10.203.99.7", "names another host (10.203.99.7)"),
+    ],
+)
+def test_namespaces_that_would_cut_the_test_off_are_refused_or_fall_back(
+    range_given: str | None, peers: str, says: str
+) -> None:
+    """``namespace`` refuses what needs the outside network; ``auto`` runs on the ID alone."""
+    environ = {"ROS_STATIC_PEERS": peers} if peers else {}
+
+    def config(mode: str) -> settings.Settings:
+        return settings.read(environ, isolation=mode, discovery_range=range_given)
+
+    with pytest.raises(RefusedError) as refused:
+        _decide(environ, config=config("namespace"))
+    assert refused.value.variable == settings.ISOLATION_ENV
+    assert says in str(refused.value) and "--isolation namespace" in str(refused.value)
+    auto = _decide(environ, config=config("auto"))
+    assert not auto.namespaces and auto.fallback is not None and says in auto.fallback
+    # The control: loopback peers and the default range leave namespace mode as asked.
+    loopback = {"ROS_STATIC_PEERS": "localhost;127.0.0.1;[::1]"}
+    policy = _decide(loopback, config=settings.read(loopback, isolation="namespace"))
+    assert policy.namespaces and policy.fallback is None

@@ -1,0 +1,293 @@
+"""``pytest_plugin``'s release: what the tests left running is ended before the ID goes.
+
+The runner's order, in a pytest session: a daemon a test left behind is ended, then the
+ID (or, isolation disabled, the resources) is released, so the next session gets it only
+then (the order of events, never a time). A signal (SIGTERM, SIGHUP: ctest's or colcon's
+timeout, a CI cancel) ends pytest as Ctrl-C does, the sweep runs, and a second signal
+cannot cut it short. Under xdist the controller passes the signal on to its workers and
+waits for them; a worker whose controller was killed still sweeps and releases. Controls:
+Ctrl-C with xdist, SIGTERM without; status shows each ID held while the tests run.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import uuid
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+
+import pytest
+from helpers.commands import CLI, HUNG
+from helpers.processes import carrying, poll_until, wait_for
+from helpers.pytest_sessions import project, run_in, run_pytest, start_pytest
+
+#: Leaves a double-forked daemon behind that notes its end in EVENTS, then waits for GO.
+LEAKING_TEST = """\
+import os, pathlib, signal, sys, time
+
+def test_leaks_a_daemon():
+    events, pid_file, go = (os.environ[n] for n in ("EVENTS", "PID_FILE", "GO"))
+    if os.fork() == 0:
+        os.setsid()
+        if os.fork() == 0:
+            def ended(signum, frame):
+                with open(events, "a") as out:
+                    out.write("daemon ended\\n")
+                os._exit(0)
+            signal.signal(signal.SIGTERM, ended)
+            pathlib.Path(pid_file).write_text(str(os.getpid()))
+            time.sleep(120)
+        os._exit(0)
+    deadline = time.monotonic() + 120
+    while not os.path.exists(go) and time.monotonic() < deadline:
+        time.sleep(0.05)
+"""
+
+
+#: The next session's test: notes that it ran, and on which ID.
+NEXT_TEST = """\
+import os
+
+def test_runs_next():
+    with open(os.environ["EVENTS"], "a") as out:
+        out.write(f"next test on {os.environ['ROS_DOMAIN_ID']}\\n")
+"""
+
+
+#: The next session's test with isolation disabled: notes that it ran (it has no ID).
+NEXT_TEST_WITHOUT_ID = """\
+import os
+
+def test_runs_next():
+    with open(os.environ["EVENTS"], "a") as out:
+        out.write("next test\\n")
+"""
+
+
+@pytest.mark.parametrize("disabled", [False, True], ids=["id", "isolation-disabled-gpu"])
+def test_a_leftover_daemon_is_ended_before_the_id_or_the_resources_are_released(
+    tmp_path: Path,
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    disabled: bool,
+) -> None:
+    """Order of events: the daemon ends, then the next session gets the pool's one ID, or
+    (isolation disabled) the one GPU both sessions ask for."""
+    events, pid_file, go = tmp_path / "events", tmp_path / "daemon.pid", tmp_path / "go"
+    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file), "GO": str(go)}
+    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
+    leaking = project(tmp_path / "leaking", LEAKING_TEST)
+    if disabled:
+        shared.update(DISABLE_ROS_ISOLATION="1", ROS_ISOLATED_TEST_CAPACITY="gpu=1")
+        following = project(tmp_path / "following", NEXT_TEST_WITHOUT_ID)
+        for root in (leaking, following):
+            (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = gpu=1\n")
+        waiting, next_event = "waiting for gpu=1", "next test"
+    else:
+        following = project(tmp_path / "following", NEXT_TEST)
+        waiting, next_event = "waiting for a free ROS_DOMAIN_ID", f"next test on {domain}"
+    first = start_pytest(leaking, shared, tmp_path / "first.log", started)
+    wait_for(pid_file)
+    second = start_pytest(following, shared, tmp_path / "second.log", started)
+    poll_until(
+        lambda: waiting in (tmp_path / "second.log").read_text(),
+        f"the second session queued: {waiting}",
+    )
+    go.touch()
+    assert first.wait(HUNG) == 0, (tmp_path / "first.log").read_text()
+    assert second.wait(HUNG) == 0, (tmp_path / "second.log").read_text()
+    assert events.read_text().splitlines() == ["daemon ended", next_event]
+    daemon = int(pid_file.read_text())
+    log = (tmp_path / "first.log").read_text()
+    assert f"stopped process {daemon}" in log, log
+    assert not Path(f"/proc/{daemon}").exists()
+
+
+#: Forks a child without exec (it inherits everything, the lock too) that ignores SIGTERM.
+FORKING_TEST = """\
+import os, pathlib, signal, time
+
+def test_forks_and_waits():
+    events, pid_file = os.environ["EVENTS"], os.environ["PID_FILE"]
+    if os.fork() == 0:
+        def noted(signum, frame):
+            with open(events, "a") as out:
+                out.write("child got SIGTERM\\n")
+        signal.signal(signal.SIGTERM, noted)
+        pathlib.Path(pid_file + ".new").write_text(str(os.getpid()))
+        os.rename(pid_file + ".new", pid_file)  # whole, never seen empty
+        while True:
+            time.sleep(1)
+    time.sleep(120)
+"""
+
+
+@pytest.mark.parametrize("signum", [15, 1])
+def test_a_signal_ends_the_tests_leftovers_before_the_release(
+    tmp_path: Path,
+    env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    signum: int,
+) -> None:
+    """SIGTERM or SIGHUP (ctest's timeout): the sweep runs, and a second one cannot cut it."""
+    events, pid_file = tmp_path / "events", tmp_path / "child.pid"
+    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file)}
+    log = tmp_path / "pytest.log"
+    session = start_pytest(project(tmp_path / "forking", FORKING_TEST), shared, log, started)
+    wait_for(pid_file)
+    child = int(pid_file.read_text())
+    session.send_signal(signum)
+    poll_until(
+        lambda: session.poll() is not None or (events.exists() and bool(events.read_text())),
+        "the sweep's SIGTERM reached the child, or pytest ended",
+    )
+    assert events.exists() and events.read_text() == "child got SIGTERM\n", log.read_text()
+    session.send_signal(signum)  # during the grace: only noted
+    assert session.wait(HUNG) == pytest.ExitCode.INTERRUPTED, log.read_text()
+    assert not Path(f"/proc/{child}").exists()
+    assert f"stopped process {child}" in log.read_text()
+    # The ID is free at once: the next session gets it without waiting.
+    following = project(tmp_path / "following", NEXT_TEST)
+    after = run_pytest(following, {**shared, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}, "test")
+    assert after.returncode == 0, after.stdout + after.stderr
+
+
+# --- a signal to the xdist controller, or the controller killed ----------------------------------
+
+
+#: Two tests (one per xdist worker): each starts a long-lived child that ignores SIGINT (a
+#: terminal's Ctrl-C reaches it too: only the sweep's SIGTERM ends it), names it in a file
+#: named after its own process (the worker), then runs on until interrupted.
+RUNNING_TEST = """\
+import os, pathlib, subprocess, sys, time
+import pytest
+
+CHILD = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(300)"
+
+@pytest.mark.parametrize("n", range(2))
+def test_runs_on(n):
+    child = subprocess.Popen([sys.executable, "-c", CHILD])
+    started = pathlib.Path(os.environ["STARTED"])
+    (started / f"{os.getpid()}.new").write_text(str(child.pid))
+    os.rename(started / f"{os.getpid()}.new", started / str(os.getpid()))  # whole, never empty
+    time.sleep(300)
+"""
+
+
+#: Where a session's processes are found: in their environment, whatever their names.
+MARK_VAR = "RIT_SESSION_MARK"
+
+
+@pytest.fixture
+def session_mark() -> Iterator[str]:
+    """``RIT_SESSION_MARK=<uuid>`` for a session's environment; whatever still carries it
+    when the test ends (it failed) is killed, so nothing of it outlives the test."""
+    entry = f"{MARK_VAR}={uuid.uuid4().hex}"
+    yield entry
+    for pid in carrying(entry):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def running_tests(folder: Path) -> dict[int, int]:
+    """Each running test's process (an xdist worker) and its child, as their files say."""
+    return {int(path.name): int(path.read_text()) for path in folder.glob("[0-9]*[0-9]")}
+
+
+def held_rows(env: Mapping[str, str], cwd: Path) -> list[dict[str, object]]:
+    """``status --json`` rows of the lock directory that hold an ID: a lock or a survivor."""
+    listed = run_in(cwd, env, [CLI, "status", "--json"])
+    assert listed.returncode == 0, listed.stderr
+    rows: list[dict[str, object]] = json.loads(listed.stdout)
+    return [row for row in rows if row["via"] in ("lock", "survivor")]
+
+
+def start_running_tests(
+    tmp_path: Path,
+    env: Mapping[str, str],
+    mark: str,
+    workers: int,
+    into: list[subprocess.Popen[bytes]],
+) -> tuple[subprocess.Popen[bytes], Path, dict[int, int]]:
+    """pytest (``-n workers``, 0: no xdist) on RUNNING_TEST in a ROS package, in a process
+    group of its own, the environment marked; once every test runs: pytest, its log, and
+    each test's process with its child."""
+    started_dir = tmp_path / "started"
+    started_dir.mkdir()
+    name, value = mark.split("=", 1)
+    session_env = {**env, "STARTED": str(started_dir), name: value}
+    root = project(tmp_path / "pkg", RUNNING_TEST)
+    log = tmp_path / "pytest.log"
+    xdist = ("-n", str(workers)) if workers else ()
+    session = start_pytest(root, session_env, log, into, (*xdist, "test"), start_new_session=True)
+    expected = max(workers, 1)  # without xdist the tests run one after the other
+    poll_until(
+        lambda: len(running_tests(started_dir)) >= expected,
+        f"{expected} test(s) running, each with its child",
+    )
+    children = running_tests(started_dir)
+    # The control for the checks after: while the tests run, status shows each ID held by
+    # the process that runs its test, and the children are found by the mark.
+    assert {row["pid"] for row in held_rows(env, tmp_path)} == set(children)
+    assert set(children.values()) <= set(carrying(mark))
+    return session, log, children
+
+
+@pytest.mark.parametrize(
+    ("how", "workers"),
+    [
+        ("SIGTERM", 2),
+        ("SIGHUP", 2),
+        ("Ctrl-C", 2),  # the control: SIGINT to the whole process group, as a terminal sends it
+        ("SIGTERM", 0),  # the control: the same signal without xdist
+    ],
+    ids=["sigterm-xdist", "sighup-xdist", "ctrl-c-xdist", "sigterm-no-xdist"],
+)
+def test_a_signal_to_the_xdist_controller_ends_the_workers_as_ctrl_c_does(
+    tmp_path: Path,
+    env: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    session_mark: str,
+    how: str,
+    workers: int,
+) -> None:
+    """SIGTERM or SIGHUP to the controller alone: pytest exits 2, as without xdist, and only
+    after every worker ended its test's child and released its ID: nothing of the session
+    lives on, and status shows nothing held in the session's lock directory."""
+    session, log, children = start_running_tests(tmp_path, env, session_mark, workers, started)
+    if how == "Ctrl-C":
+        os.killpg(session.pid, signal.SIGINT)
+    else:
+        session.send_signal(signal.Signals[how])
+    code = session.wait(HUNG)
+    output = log.read_text()
+    assert code == pytest.ExitCode.INTERRUPTED, output
+    # Nothing of the session lives once pytest has exited: workers, tests' children.
+    assert carrying(session_mark) == [], output
+    for child in children.values():
+        assert f"stopped process {child}" in output, output  # ended by the sweep
+    assert held_rows(env, tmp_path) == [], output
+
+
+def test_xdist_workers_release_when_the_controller_is_killed(
+    tmp_path: Path,
+    env: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    session_mark: str,
+) -> None:
+    """The controller gone (SIGKILL): execnet interrupts each worker (SIGINT), whose report
+    to the controller then fails; the worker has ended its test's child and released its ID
+    before, not in unconfigure, which pytest skips after that failure."""
+    session, log, children = start_running_tests(tmp_path, env, session_mark, 2, started)
+    session.kill()
+    assert session.wait(HUNG) == -signal.SIGKILL
+    poll_until(lambda: carrying(session_mark) == [], "every process of the session ended")
+    output = log.read_text()
+    for child in children.values():
+        assert f"stopped process {child}" in output, output  # ended by the sweep
+    assert held_rows(env, tmp_path) == [], output
