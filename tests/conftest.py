@@ -18,6 +18,8 @@ from helpers.domains import free_ids
 from helpers.processes import Children
 from helpers.workspace import CrosstalkBuilds
 
+from ros_isolated_test.process import reaper
+
 #: Strict mode, as CI runs the suite: any skip fails (``pytest --no-skips`` does the same).
 NO_SKIPS_ENV = "ROS_ISOLATED_TEST_NO_SKIPS"
 
@@ -125,6 +127,20 @@ def _isolated_process_env(lock_dir: Path, monkeypatch: pytest.MonkeyPatch) -> It
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("ROS_ISOLATED_TEST_LOCK_DIR", str(lock_dir))
     yield
+
+
+@pytest.fixture(autouse=True)
+def _subreaper_restored() -> Iterator[None]:
+    """pytest's process adopts no orphans after a test that ran the supervisor in process.
+
+    ``supervisor.run`` makes its process a subreaper for good (the runner's is short-lived):
+    left on, every process a later test orphans would come back to pytest, which a test
+    of who started a process (a squatter is nobody's child) then reads wrongly.
+    """
+    was = reaper.is_subreaper()
+    yield
+    if not was:
+        reaper.stop_subreaper()
 
 
 @pytest.fixture(scope="session")

@@ -18,7 +18,6 @@ import json
 import os
 import subprocess
 import sys
-import sysconfig
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -29,6 +28,7 @@ from helpers.cmake_package import (
     CMAKE_FILES,
     PackageBuild,
     build_wheel,
+    install_wheel,
     installed_prefix,
     path_only_env,
 )
@@ -325,20 +325,12 @@ def test_installed_from_the_wheel_cmake_finds_it_from_path_alone(
 ) -> None:
     """pip install --prefix, then a CMake project configured with only that bin/ on PATH."""
     prefix = tmp_path / "installed"
-    done = subprocess.run(
-        # --ignore-installed: without it pip uninstalls this suite's own (editable) install
-        # from .venv before installing into the prefix.
-        [sys.executable, "-m", "pip", "install", "--no-deps", "--disable-pip-version-check",
-         "-q", "--ignore-installed", "--prefix", str(prefix), str(wheel)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
-    assert done.returncode == 0, f"pip install failed:\n{done.stdout}{done.stderr}"
+    site = install_wheel(wheel, prefix)
     assert (Path(sys.executable).parent / "ros-isolated-test").is_file(), ".venv's install gone"
     cmake_dir = prefix / "share" / "ros_isolated_test" / "cmake"
     assert sorted(p.name for p in cmake_dir.iterdir()) == sorted(
         p.name for p in CMAKE_FILES.glob("*.cmake")
     )
-    site = sysconfig.get_path("purelib", vars={"base": str(prefix), "platbase": str(prefix)})
     source = tmp_path / "src"
     source.mkdir()
     (source / "CMakeLists.txt").write_text(

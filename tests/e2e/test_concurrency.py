@@ -18,6 +18,7 @@ from typing import IO
 
 import pytest
 from helpers.commands import CLI, run_cli
+from helpers.coordinator import STATUS_COLUMNS
 from helpers.domains import free_ids
 
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, POOL_ENV
@@ -213,16 +214,7 @@ def test_fifty_runners_at_once_hold_fifty_distinct_ids(crowd: Crowd, env: dict[s
 
     table = run_cli(["status"], status_env)
     assert table.returncode == 0, table.stderr
-    assert table.stdout.splitlines()[0].split() == [
-        "ID",
-        "HELD",
-        "BY",
-        "PID",
-        "USER",
-        "STARTED",
-        "GZ_PARTITION",
-        "COMMAND",
-    ]
+    assert table.stdout.splitlines()[0].split() == STATUS_COLUMNS
     table_rows = _table_rows(table.stdout)
     # The control for the check after they end: while they hold, every runner's PID is seen.
     listed_while_held = _listed_pids(table.stdout)

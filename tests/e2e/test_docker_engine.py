@@ -137,12 +137,19 @@ def wait_until_started(marker: Path, process: subprocess.Popen[str], log: Path) 
 
 
 def start_test(
-    containers: Containers, options: list[str], command: list[str], log: Path, marker: Path
+    containers: Containers,
+    lock_dir: Path,
+    results: Path,
+    log: Path,
+    script: str,
+    marker: str,
+    *ids: int,
 ) -> tuple[str, subprocess.Popen[str]]:
-    """A container whose runner runs ``command`` (result ``t.xml``), once its test made
-    ``marker``."""
-    name, process = containers.start(options, run_args("t.xml", *command), log)
-    wait_until_started(marker, process, log)
+    """A container on ``lock_dir`` and pool ``ids`` whose runner runs ``sh -c script`` (result
+    ``t.xml``), once its test made ``results/marker``."""
+    options = [*mounts(lock_dir, results), *pool(*ids)]
+    name, process = containers.start(options, run_args("t.xml", "sh", "-c", script), log)
+    wait_until_started(results / marker, process, log)
     return name, process
 
 
@@ -180,13 +187,7 @@ def test_docker_stop_passes_sigterm_on_and_the_result_names_the_id(
 ) -> None:
     (domain_id,) = free_ids(1)
     log = tmp_path / "container.log"
-    name, process = start_test(
-        containers,
-        [*mounts(lock_dir, results), *pool(domain_id)],
-        ["sh", "-c", TRAP_SCRIPT],
-        log,
-        results / "ready",
-    )
+    name, process = start_test(containers, lock_dir, results, log, TRAP_SCRIPT, "ready", domain_id)
     # SIGKILL only after 120 s: far later than a test that got its SIGTERM takes to end.
     engine.docker("stop", "--time", "120", name, timeout=HUNG + 120)
     code = process.wait(timeout=HUNG)
@@ -207,13 +208,8 @@ def test_docker_kill_leaves_the_placeholder(
     """SIGKILL ends PID 1 at once: the placeholder written before the test is what stays."""
     (domain_id,) = free_ids(1)
     log = tmp_path / "container.log"
-    name, process = start_test(
-        containers,
-        [*mounts(lock_dir, results), *pool(domain_id)],
-        ["sh", "-c", "echo ready > ready; while :; do sleep 0.1; done"],
-        log,
-        results / "ready",
-    )
+    script = "echo ready > ready; while :; do sleep 0.1; done"
+    name, process = start_test(containers, lock_dir, results, log, script, "ready", domain_id)
     engine.docker("kill", "--signal", "KILL", name)
     code = process.wait(timeout=HUNG)
     assert code == 128 + signal.SIGKILL, output_of(log)
@@ -410,6 +406,25 @@ def meet(me: str, other: str) -> str:
     return f'echo $ROS_DOMAIN_ID > "{me}.id"; while [ ! -e "{other}.id" ]; do sleep 0.05; done'
 
 
+def meet_container_and_host(
+    containers: Containers,
+    children: Children,
+    env: dict[str, str],
+    lock_dir: Path,
+    results: Path,
+    log: Path,
+    *ids: int,
+) -> None:
+    """Container and host runner ``meet`` on pool ``ids``: the lock-dir test and its control."""
+    _, process = start_test(
+        containers, lock_dir, results, log, meet("container", "host"), "container.id", *ids
+    )
+    host = host_runner(children, env, f"cd {results}; {meet('host', 'container')}", *ids)
+    stdout, stderr = host.communicate(timeout=HUNG)
+    assert host.returncode == 0, stdout + stderr
+    assert process.wait(timeout=HUNG) == 0, output_of(log)
+
+
 def test_a_host_runner_waits_for_the_id_a_container_holds_through_the_lock_dir(
     containers: Containers,
     env: dict[str, str],
@@ -425,11 +440,7 @@ def test_a_host_runner_waits_for_the_id_a_container_holds_through_the_lock_dir(
         "touch container.done"
     )
     _, process = start_test(
-        containers,
-        [*mounts(lock_dir, results), *pool(domain_id)],
-        ["sh", "-c", container_test],
-        log,
-        results / "container.id",
+        containers, lock_dir, results, log, container_test, "container.id", domain_id
     )
     # The host's test notes whether the container's had ended when it started.
     host_test = (
@@ -460,17 +471,7 @@ def test_a_container_and_a_host_runner_sharing_the_lock_dir_hold_distinct_ids_at
 ) -> None:
     ids = free_ids(2)
     log = tmp_path / "container.log"
-    _, process = start_test(
-        containers,
-        [*mounts(lock_dir, results), *pool(*ids)],
-        ["sh", "-c", meet("container", "host")],
-        log,
-        results / "container.id",
-    )
-    host = host_runner(children, env, f"cd {results}; {meet('host', 'container')}", *ids)
-    stdout, stderr = host.communicate(timeout=HUNG)
-    assert host.returncode == 0, stdout + stderr
-    assert process.wait(timeout=HUNG) == 0, output_of(log)
+    meet_container_and_host(containers, children, env, lock_dir, results, log, *ids)
     held = {int((results / f"{side}.id").read_text()) for side in ("container", "host")}
     assert held == set(ids), "both held one ID at the same moment"
 
@@ -487,17 +488,7 @@ def test_control_without_the_shared_lock_dir_both_hold_one_id_at_once(
     (domain_id,) = free_ids(1)
     log = tmp_path / "container.log"
     its_own = tmp_path_factory.mktemp("container-locks")
-    _, process = start_test(
-        containers,
-        [*mounts(its_own, results), *pool(domain_id)],
-        ["sh", "-c", meet("container", "host")],
-        log,
-        results / "container.id",
-    )
-    host = host_runner(children, env, f"cd {results}; {meet('host', 'container')}", domain_id)
-    stdout, stderr = host.communicate(timeout=HUNG)
-    assert host.returncode == 0, stdout + stderr
-    assert process.wait(timeout=HUNG) == 0, output_of(log)
+    meet_container_and_host(containers, children, env, its_own, results, log, domain_id)
     for side in ("container", "host"):
         assert (results / f"{side}.id").read_text().strip() == str(domain_id), side
 

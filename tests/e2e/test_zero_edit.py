@@ -20,14 +20,13 @@ import re
 import shutil
 import subprocess
 import sys
-import sysconfig
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
 from helpers import capabilities
-from helpers.cmake_package import build_wheel, runners_of
+from helpers.cmake_package import build_wheel, install_wheel, runners_of
 from helpers.commands import REPO, run_cli
 from helpers.domains import free_ids
 from helpers.workspace import crosstalk_workspace
@@ -558,13 +557,7 @@ def test_an_installed_wheel_prints_its_own_include(tmp_path: Path, env: dict[str
     isolates with its own runner; with the files gone, one line says what is wrong (exit 2)."""
     wheel = build_wheel(tmp_path / "wheel")
     prefix = tmp_path / "installed"
-    done = subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--no-deps", "--disable-pip-version-check",
-         "-q", "--ignore-installed", "--prefix", str(prefix), str(wheel)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
-    assert done.returncode == 0, f"pip install failed:\n{done.stdout}{done.stderr}"
-    site = sysconfig.get_path("purelib", vars={"base": str(prefix), "platbase": str(prefix)})
+    site = install_wheel(wheel, prefix)
     installed = {
         **env,
         "PATH": os.pathsep.join((str(prefix / "bin"), env["PATH"])),

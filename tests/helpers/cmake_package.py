@@ -16,6 +16,7 @@ import re
 import shutil
 import subprocess
 import sys
+import sysconfig
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -81,6 +82,19 @@ def build_wheel(root: Path) -> Path:
     assert done.returncode == 0, f"pip wheel failed:\n{done.stdout}{done.stderr}"
     (built,) = (root / "dist").glob("ros_isolated_test-*.whl")
     return built
+
+
+def install_wheel(wheel: Path, prefix: Path) -> str:
+    """``pip install --prefix`` of ``wheel`` as a user does, for each wheel test: its site dir."""
+    done = subprocess.run(
+        # --ignore-installed: without it pip uninstalls this suite's own (editable) install
+        # from .venv before installing into the prefix.
+        [sys.executable, "-m", "pip", "install", "--no-deps", "--disable-pip-version-check",
+         "-q", "--ignore-installed", "--prefix", str(prefix), str(wheel)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, f"pip install failed:\n{done.stdout}{done.stderr}"
+    return sysconfig.get_path("purelib", vars={"base": str(prefix), "platbase": str(prefix)})
 
 
 def path_only_env(prefix: Path) -> dict[str, str]:

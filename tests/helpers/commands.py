@@ -148,9 +148,25 @@ def start_cli(
 
     ``into`` is the ``started`` fixture's list: whatever is still running is killed at the end.
     """
+    return start_process([CLI, *args], env, log, into)
+
+
+def start_process(
+    argv: Sequence[str],
+    env: Mapping[str, str],
+    log: Path,
+    into: list[subprocess.Popen[bytes]],
+    **popen: object,
+) -> subprocess.Popen[bytes]:
+    """``argv`` in the background, logged, kept in ``into``: the one Popen of every start_*."""
     with log.open("wb") as out:
-        process = subprocess.Popen(
-            [CLI, *args], env=dict(env), stdin=subprocess.DEVNULL, stdout=out, stderr=out
+        process: subprocess.Popen[bytes] = subprocess.Popen(  # type: ignore[call-overload]
+            list(argv),
+            env=dict(env),
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=out,
+            **popen,
         )
     into.append(process)
     return process
@@ -169,14 +185,4 @@ def start_runner(
     Kept in ``into`` (the ``started`` fixture's list); ``popen`` goes to Popen, e.g.
     ``start_new_session=True`` for a process group of its own that a test kills whole.
     """
-    with log.open("wb") as out:
-        process: subprocess.Popen[bytes] = subprocess.Popen(  # type: ignore[call-overload]
-            [sys.executable, "-u", runner_script, *args],
-            env=dict(env),
-            stdin=subprocess.DEVNULL,
-            stdout=out,
-            stderr=out,
-            **popen,
-        )
-    into.append(process)
-    return process
+    return start_process([sys.executable, "-u", runner_script, *args], env, log, into, **popen)

@@ -65,6 +65,8 @@ sys.stdin.read()
 
 #: A test command that prints the ID it was given.
 PRINT_ID = 'echo "id=$ROS_DOMAIN_ID"'
+#: The columns of ``status``'s table, as a user reads its header (unit and e2e tests alike).
+STATUS_COLUMNS = ["ID", "HELD", "BY", "PID", "USER", "STARTED", "GZ_PARTITION", "COMMAND"]
 
 
 def without_domain_id() -> dict[str, str]:

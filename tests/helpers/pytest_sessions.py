@@ -14,7 +14,7 @@ import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from helpers.commands import HUNG, start_cli
+from helpers.commands import HUNG, start_cli, start_process
 from helpers.processes import wait_for
 
 PYTEST = (sys.executable, "-m", "pytest", "-p", "no:cacheprovider")
@@ -64,18 +64,7 @@ def start_pytest(
 
     ``popen`` goes to Popen, e.g. ``start_new_session=True`` for a process group of its own.
     """
-    with log.open("wb") as out:
-        process: subprocess.Popen[bytes] = subprocess.Popen(  # type: ignore[call-overload]
-            [*PYTEST, *args],
-            cwd=cwd,
-            env=dict(env),
-            stdin=subprocess.DEVNULL,
-            stdout=out,
-            stderr=out,
-            **popen,
-        )
-    into.append(process)
-    return process
+    return start_process([*PYTEST, *args], env, log, into, cwd=cwd, **popen)
 
 
 def project(root: Path, test: str = RECORDING_TEST, package: bool = True) -> Path:

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from helpers import capabilities
 from helpers.cli_runs import TOUCH, one_error_line
-from helpers.commands import BIN, CLI, HUNG, ament, run_cli
+from helpers.commands import BIN, CLI, HUNG, ament, ament_args, run_cli
 from helpers.results import load_result
 
 
@@ -360,12 +360,7 @@ def test_sigterm_to_the_runner_is_passed_on_to_the_test(
             sys.executable,
             "-u",
             runner_script,
-            str(result),
-            "--package-name",
-            "pkg",
-            "--generate-result-on-success",
-            "--command",
-            *command,
+            *ament_args(result, command, "--generate-result-on-success"),
         ]
     code, output = _start_and_terminate(argv, env, tmp_path)
     assert (tmp_path / "got-term").read_text() == str(int(signal.SIGTERM))
@@ -391,6 +386,17 @@ def test_test_killed_by_forwarded_sigterm_is_reported(env: dict[str, str], tmp_p
 # --- the RUNNER script with a Python that lacks the package --------------------------------------
 
 
+def run_bare(
+    python: str, path: str, lock_dir: Path, runner_script: str, args: list[str], cwd: Path
+) -> subprocess.CompletedProcess[str]:
+    """The RUNNER under ``python`` with nothing but PATH and the lock dir: both tests below."""
+    return subprocess.run(
+        ["/usr/bin/env", "-i", f"PATH={path}", f"ROS_ISOLATED_TEST_LOCK_DIR={lock_dir}",
+         python, "-u", runner_script, *args],
+        capture_output=True, check=False, text=True, timeout=60, cwd=cwd,
+    )  # fmt: skip
+
+
 @capabilities.BARE_PYTHON
 def test_runner_script_reexecs_with_the_clis_python(
     runner_script: str, lock_dir: Path, tmp_path: Path
@@ -400,28 +406,8 @@ def test_runner_script_reexecs_with_the_clis_python(
     result = tmp_path / "pkg" / "t.xml"
     # The runner's own command line, read by the test: it must be the venv's interpreter.
     command = ["sh", "-c", "tr '\\0' ' ' < /proc/$PPID/cmdline; echo"]
-    proc = subprocess.run(
-        [
-            "/usr/bin/env",
-            "-i",
-            f"PATH={BIN}:/usr/bin:/bin",
-            f"ROS_ISOLATED_TEST_LOCK_DIR={lock_dir}",
-            python,
-            "-u",
-            runner_script,
-            str(result),
-            "--package-name",
-            "pkg",
-            "--generate-result-on-success",
-            "--command",
-            *command,
-        ],
-        capture_output=True,
-        check=False,
-        text=True,
-        timeout=60,
-        cwd=tmp_path,
-    )
+    args = ament_args(result, command, "--generate-result-on-success")
+    proc = run_bare(python, f"{BIN}:/usr/bin:/bin", lock_dir, runner_script, args, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.startswith("Running with ROS_DOMAIN_ID ")
     assert f"{BIN}/python" in proc.stdout
@@ -434,26 +420,8 @@ def test_runner_script_without_the_cli_on_path_says_how_to_fix_it(
 ) -> None:
     python = capabilities.bare_python()
     assert python is not None
-    proc = subprocess.run(
-        [
-            "/usr/bin/env",
-            "-i",
-            "PATH=/usr/bin:/bin",
-            f"ROS_ISOLATED_TEST_LOCK_DIR={lock_dir}",
-            python,
-            "-u",
-            runner_script,
-            str(tmp_path / "t.xml"),
-            "--command",
-            "touch",
-            "ran",
-        ],
-        capture_output=True,
-        check=False,
-        text=True,
-        timeout=60,
-        cwd=tmp_path,
-    )
+    args = [str(tmp_path / "t.xml"), "--command", "touch", "ran"]
+    proc = run_bare(python, "/usr/bin:/bin", lock_dir, runner_script, args, tmp_path)
     assert proc.returncode == 2
     assert not (tmp_path / "ran").exists()
     assert "cannot import ros-isolated-test" in proc.stderr

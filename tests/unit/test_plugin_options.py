@@ -29,24 +29,10 @@ from helpers.pytest_sessions import (
     hold_the_one_id,
     project,
     recorded,
-    recording_env,
     run_pytest,
-    without_resources,
 )
 
 from ros_isolated_test.plugin_options import RESOURCES_OPTION
-
-
-@pytest.fixture
-def plain_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
-    return recording_env(env, tmp_path)
-
-
-@pytest.fixture
-def resource_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
-    """plain_env without a resource request or capacity of this machine's own."""
-    return without_resources(recording_env(env, tmp_path))
-
 
 # --- the whole plugin: isolated or not -----------------------------------------------------------
 

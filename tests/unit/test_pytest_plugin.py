@@ -26,16 +26,9 @@ from helpers.pytest_sessions import (
     hold_the_one_id,
     project,
     recorded,
-    recording_env,
     run_in,
     run_pytest,
 )
-
-
-@pytest.fixture
-def plain_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
-    return recording_env(env, tmp_path)
-
 
 # --- presets, DISABLE_ROS_ISOLATION, a runner around pytest --------------------------------------
 
@@ -116,21 +109,20 @@ def test_a_mark_for_another_id_is_no_runner(tmp_path: Path, plain_env: dict[str,
 
 def test_pool_exhausted_waits_then_fails(
     tmp_path: Path,
-    plain_env: dict[str, str],
+    exhausted_env: dict[str, str],
     one_id: dict[str, str],
     started: list[subprocess.Popen[bytes]],
 ) -> None:
     root = project(tmp_path / "pkg")
-    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "1"}
-    holder = hold_the_one_id(tmp_path, env, started)
-    done = run_pytest(root, env, "test")
+    holder = hold_the_one_id(tmp_path, exhausted_env, started)
+    done = run_pytest(root, exhausted_env, "test")
     assert done.returncode == 3, done.stdout + done.stderr
     assert "waiting for a free ROS_DOMAIN_ID" in done.stderr
     assert "after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
     assert not (tmp_path / "record.json").exists()
     holder.terminate()  # the runner ends its test, then releases the ID
     holder.wait(HUNG)
-    again = run_pytest(root, env, "test")  # the control: the ID free, the same run passes
+    again = run_pytest(root, exhausted_env, "test")  # the control: the ID free, the same run passes
     assert again.returncode == 0, again.stdout + again.stderr
     assert recorded(tmp_path)["ROS_DOMAIN_ID"] == one_id["ROS_ISOLATED_TEST_DOMAINS"]
 

@@ -20,19 +20,10 @@ from helpers.processes import wait_for
 from helpers.pytest_sessions import (
     PYTEST,
     project,
-    recording_env,
     run_in,
     run_pytest,
     start_pytest,
-    without_resources,
 )
-
-
-@pytest.fixture
-def resource_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
-    """plain_env without a resource request or capacity of this machine's own."""
-    return without_resources(recording_env(env, tmp_path))
-
 
 #: Holds its session open until GO exists (so another runner can try the same resources).
 HOLDING_TEST = """\

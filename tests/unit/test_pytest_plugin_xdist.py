@@ -21,14 +21,8 @@ from helpers.pytest_sessions import (
     hold_the_one_id,
     project,
     recorded,
-    recording_env,
     run_pytest,
 )
-
-
-@pytest.fixture
-def plain_env(env: dict[str, str], tmp_path: Path) -> dict[str, str]:
-    return recording_env(env, tmp_path)
 
 
 @pytest.mark.parametrize("explicit", [False, True])
@@ -66,15 +60,11 @@ def test_xdist_with_disable_ros_isolation_says_so(
 
 
 def test_xdist_pool_exhausted_exits_3_without_restarting_workers(
-    tmp_path: Path,
-    plain_env: dict[str, str],
-    one_id: dict[str, str],
-    started: list[subprocess.Popen[bytes]],
+    tmp_path: Path, exhausted_env: dict[str, str], started: list[subprocess.Popen[bytes]]
 ) -> None:
     root = project(tmp_path / "pkg")
-    env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "1"}
-    holder = hold_the_one_id(tmp_path, env, started)
-    done = run_pytest(root, env, "-n", "2", "test")
+    holder = hold_the_one_id(tmp_path, exhausted_env, started)
+    done = run_pytest(root, exhausted_env, "-n", "2", "test")
     output = done.stdout + done.stderr
     assert done.returncode == 3, output
     assert "ros-isolated-test: error: after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
@@ -82,5 +72,6 @@ def test_xdist_pool_exhausted_exits_3_without_restarting_workers(
     assert not (tmp_path / "record.json").exists()
     holder.terminate()
     holder.wait(HUNG)
-    again = run_pytest(root, env, "-n", "1", "test")  # the control: the ID free, it passes
+    # The control: the ID free, it passes.
+    again = run_pytest(root, exhausted_env, "-n", "1", "test")
     assert again.returncode == 0, again.stdout + again.stderr

@@ -21,7 +21,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from helpers import process_tree
 from helpers.commands import CLI, HUNG, run_cli
 from helpers.domains import free_ids
 from helpers.process_tree import Launcher, alive, kill_tagged, tagged, wait_for_pid
@@ -159,28 +158,6 @@ def test_a_file_that_is_no_record_blocks_nothing_and_is_left_alone(
 
 
 # --- a runner killed with SIGKILL: its orphans are written down as survivors ----------------
-
-
-@pytest.fixture
-def tag() -> Iterator[str]:
-    with process_tree.new_tag() as value:
-        yield value
-
-
-@pytest.fixture
-def launcher(tag: str) -> Iterator[Launcher]:
-    with process_tree.launching(tag) as started:
-        yield started
-
-
-@pytest.fixture
-def domain() -> int:
-    return process_tree.one_free_id()
-
-
-@pytest.fixture
-def tree_env(env: dict[str, str], tag: str, domain: int) -> dict[str, str]:
-    return process_tree.tree_environment(env, tag, domain)
 
 
 def test_orphans_of_a_killed_runner_keep_their_id_from_other_tests(

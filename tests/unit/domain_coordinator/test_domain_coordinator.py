@@ -24,7 +24,8 @@ from lxml import etree
 
 import ros_isolated_test.domain_coordinator as package
 
-#: Each public name and the module (below the package) that defines it.
+#: Each public name and the module (below the package) that defines it. Written out, not
+#: read from the package's own ``_MODULE_OF``: that table is what these tests check.
 DEFINED_IN = {
     "LOCK_DIR_ENV": "lock_dir",
     "LockDirError": "lock_dir",

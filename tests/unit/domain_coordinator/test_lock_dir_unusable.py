@@ -32,7 +32,6 @@ from helpers.hostile_lock_dir import (
     as_user,
     error_line,
     granted_id,
-    make_shared_lock_dir,
     pick_ids,
     plant_file,
     run_timed,
@@ -44,12 +43,6 @@ from helpers.results import result_error
 
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, DomainCoordinator, LockDirError
 from ros_isolated_test.domain_coordinator.lock_files import lock_path
-
-
-@pytest.fixture
-def shared_lock_dir(traversable_dir: Path) -> Path:
-    """A mode-1777 lock directory that the users nobody and daemon can reach."""
-    return make_shared_lock_dir(traversable_dir)
 
 
 def test_a_lock_dir_that_is_a_file_is_a_clear_error(tmp_path: Path, env: dict[str, str]) -> None:

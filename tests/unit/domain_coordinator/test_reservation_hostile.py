@@ -55,13 +55,6 @@ from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
 from ros_isolated_test.domain_coordinator.records import record_path
 from ros_isolated_test.domain_coordinator.reservation import release_stamp
 
-
-@pytest.fixture
-def shared_lock_dir(traversable_dir: Path) -> Path:
-    """A mode-1777 lock directory that the users nobody and daemon can reach."""
-    return make_shared_lock_dir(traversable_dir)
-
-
 # -- a lock file another user planted -------------------------------------------------------
 
 

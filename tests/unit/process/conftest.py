@@ -1,26 +1,14 @@
-"""Fixtures of the process tests: tags that find a test's processes again, runners in the
-background, and a pool of one free ID so the next run must get the very same ID."""
+"""Fixtures of the process tests: tags that find a test's processes again, and discovery on
+this host only (``tag``, ``launcher``, ``domain`` and ``tree_env`` are tests/unit/conftest.py's,
+which test_block.py shares)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 
 import pytest
-from helpers import capabilities, process_tree
-from helpers.process_tree import Launcher
+from helpers import capabilities
 from helpers.survivors import kill_all_with, new_tag
-
-
-@pytest.fixture
-def tag() -> Iterator[str]:
-    with process_tree.new_tag() as value:
-        yield value
-
-
-@pytest.fixture
-def launcher(tag: str) -> Iterator[Launcher]:
-    with process_tree.launching(tag) as started:
-        yield started
 
 
 @pytest.fixture
@@ -35,16 +23,6 @@ def tags() -> Iterator[Callable[[], str]]:
     yield new
     for tag in made:
         kill_all_with(tag)
-
-
-@pytest.fixture
-def domain() -> int:
-    return process_tree.one_free_id()
-
-
-@pytest.fixture
-def tree_env(env: dict[str, str], tag: str, domain: int) -> dict[str, str]:
-    return process_tree.tree_environment(env, tag, domain)
 
 
 @pytest.fixture

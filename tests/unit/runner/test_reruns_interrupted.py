@@ -21,7 +21,6 @@ from pathlib import Path
 
 import pytest
 from helpers.commands import ament, ament_args, run_cli, start_cli, start_runner
-from helpers.domains import free_ids
 from helpers.processes import Children, poll_until, wait_for
 from helpers.reruns import (
     COUNTING,
@@ -60,16 +59,25 @@ def test_a_signal_to_the_runner_ends_the_run_without_further_attempts(
     )
 
 
+def hold_before_the_rerun(
+    children: Children, lock_dir: Path, one_id: dict[str, str], begun: Path, release: Path
+) -> subprocess.Popen[str]:
+    """Attempt 1 begun, a holder queues, attempt 1 is released: the rerun must wait behind it."""
+    wait_for(begun)
+    holder = queued_holder(children, lock_dir, int(one_id["ROS_ISOLATED_TEST_DOMAINS"]))
+    release.touch()
+    assert children.first_line(holder) == "held"
+    return holder
+
+
 def test_a_signal_while_a_rerun_waits_for_its_id_ends_the_run_at_once(
-    env: dict[str, str],
+    one_id: dict[str, str],
     lock_dir: Path,
     tmp_path: Path,
     children: Children,
     started: list[subprocess.Popen[bytes]],
 ) -> None:
     """A holder queued while attempt 1 runs gets the only ID first; the rerun waits behind it."""
-    (domain_id,) = free_ids(1)
-    one = {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
     begun, release, state = tmp_path / "begun", tmp_path / "release", tmp_path / "count"
     script = (
         f'{COUNTING.rsplit("; exit", 1)[0]}; : > "{begun}"; '
@@ -80,12 +88,9 @@ def test_a_signal_while_a_rerun_waits_for_its_id_ends_the_run_at_once(
     runner = start_cli(
         ["run", "--rerun-failures", "2", "--junit-xml", str(result),
          "--", "sh", "-c", script, "t", str(state)],
-        one, log, started,
+        one_id, log, started,
     )  # fmt: skip
-    wait_for(begun)
-    holder = queued_holder(children, lock_dir, domain_id)
-    release.touch()
-    assert children.first_line(holder) == "held"
+    holder = hold_before_the_rerun(children, lock_dir, one_id, begun, release)
     poll_until(lambda: "waiting for a free ROS_DOMAIN_ID" in log.read_text(), "the rerun waits")
     runner.send_signal(signal.SIGTERM)
     assert runner.wait(timeout=120) == 1  # attempt 1's code: the rerun never ran
@@ -110,15 +115,13 @@ OWN_FILE_THEN_WAIT = (
 
 
 def test_a_rerun_that_gets_no_id_names_where_the_first_attempts_file_is(
-    env: dict[str, str],
+    one_id: dict[str, str],
     lock_dir: Path,
     tmp_path: Path,
     children: Children,
     started: list[subprocess.Popen[bytes]],
 ) -> None:
     """The test's own file of attempt 1 moves to .attempt1.orig: the result names that file."""
-    (domain_id,) = free_ids(1)
-    one = {**env, "ROS_ISOLATED_TEST_DOMAINS": str(domain_id)}
     begun, release = tmp_path / "begun", tmp_path / "release"
     result = tmp_path / "no_id.xml"
     log = tmp_path / "log"
@@ -126,12 +129,9 @@ def test_a_rerun_that_gets_no_id_names_where_the_first_attempts_file_is(
         # The rerun queues behind the holder (queued first), and gives up after 2 s.
         ["run", "--rerun-failures", "1", "--wait-timeout", "2", "--junit-xml", str(result),
          "--", "sh", "-c", OWN_FILE_THEN_WAIT, "t", str(result), str(begun), str(release)],
-        one, log, started,
+        one_id, log, started,
     )  # fmt: skip
-    wait_for(begun)
-    holder = queued_holder(children, lock_dir, domain_id)
-    release.touch()
-    assert children.first_line(holder) == "held"
+    holder = hold_before_the_rerun(children, lock_dir, one_id, begun, release)
     assert runner.wait(timeout=120) == 1  # attempt 1's code: the rerun never ran
     said = log.read_text()
     assert "attempt 2 did not run" in said, said

@@ -15,7 +15,7 @@ import subprocess
 from pathlib import Path
 
 from helpers.commands import run_cli, start_cli
-from helpers.coordinator import status_rows
+from helpers.coordinator import STATUS_COLUMNS, status_rows
 from helpers.processes import poll_until
 
 from ros_isolated_test.domain_coordinator.queue import Waiter
@@ -69,16 +69,7 @@ def test_each_use_is_a_row_naming_what_holds_the_id() -> None:
     assert gz_partition(USES[0]) == name
     assert [gz_partition(use) for use in USES[1:]] == [None] * 5  # only a runner's test has one
     header, *rows = table(_status(USES)).splitlines()
-    assert header.split() == [
-        "ID",
-        "HELD",
-        "BY",
-        "PID",
-        "USER",
-        "STARTED",
-        "GZ_PARTITION",
-        "COMMAND",
-    ]
+    assert header.split() == STATUS_COLUMNS
     started = iso_time(NOON)
     assert [row.split()[:6] for row in rows] == [
         ["7", "runner", "4242", "alice", started, name],
