@@ -54,7 +54,7 @@ def new_parser(target: object | None = None) -> etree.XMLParser:
 
 
 def message(error: etree.XMLSyntaxError) -> str:
-    """What libxml2 said, without where (that is in ``lineno``)."""
+    """What libxml2 said; its own words end with the line and column it stopped at."""
     return str(error.msg if hasattr(error, "msg") else error).strip()
 
 

@@ -15,7 +15,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -162,10 +161,8 @@ def test_timeout_also_stops_the_tests_children(env: dict[str, str], tmp_path: Pa
     child = int((tmp_path / "child.pid").read_text())
     try:
         assert proc.returncode == 124, proc.stdout + proc.stderr
-        deadline = time.monotonic() + 2
-        while _alive(child) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert not _alive(child), "the test's child survived the timeout"
+        # The order of events, no clock: the runner ends the tree before it exits.
+        assert not _alive(child), "the test's child outlived the runner after the timeout"
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(child, signal.SIGKILL)
