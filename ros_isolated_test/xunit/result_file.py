@@ -73,10 +73,9 @@ class ResultFile:
         # How that final word is built from the properties, whether it is checked, and
         # the earlier attempts it was written beside, to write it again.
         self._last: _Word | None = None
-        # A rerun series (from next_attempt on): the suites of the attempts whose final
-        # word was written, put beside each later word so the file on disk never shows
+        # A rerun series: the suites of the attempts whose final word was written (none
+        # until end_attempt), put beside each later word so the file on disk never shows
         # an attempt without the failures before it; the last one kept (end_attempt).
-        self._series = False
         self._attempts: list[Suite] = []
         self._kept_last: Suite | None = None
         # Whether adopt() kept the test's own file aside at ``original``; whether it took
@@ -178,7 +177,6 @@ class ResultFile:
         """
         self.properties = dict(properties)
         self.problems = []
-        self._series = True
         if self.path is None:
             return True
         assert self.original is not None
@@ -252,7 +250,8 @@ class ResultFile:
             return None
         from ros_isolated_test.xunit.attempts import merge_attempts
 
-        merged = merge_attempts(self._attempts)
+        # Taken whole: what is written from now on stands beside no earlier attempt.
+        merged, self._attempts = merge_attempts(self._attempts), []
         merged.properties["ros_domain_ids"] = ", ".join(domain_ids)
 
         def build(properties: dict[str, str]) -> Suite:
@@ -260,7 +259,6 @@ class ResultFile:
                 merged.properties.setdefault(name, shown(value))
             return merged
 
-        self._series = False  # it holds every attempt already
         return self._final(build, checked=True)
 
     def _beside_earlier(self, suite: Suite, earlier: tuple[Suite, ...] | None) -> Suite:
@@ -284,7 +282,7 @@ class ResultFile:
         properties = dict(self.properties)
         suite = build(properties)
         rendered = validate.render(suite, checked)
-        earlier = tuple(self._attempts) if self._series else None
+        earlier = tuple(self._attempts) or None
         data = (
             rendered.data
             if earlier is None
@@ -331,8 +329,7 @@ class ResultFile:
             "the test most likely timed out."
         )
         suite = self._suite([self.case(Outcome.ERROR, message)], 0.0, dict(self.properties))
-        if self._series:
-            suite = self._beside_earlier(suite, tuple(self._attempts))
+        suite = self._beside_earlier(suite, tuple(self._attempts) or None)
         data = placeholder.with_room(serialise.serialize(suite))
         if not self._write(data):
             return False
