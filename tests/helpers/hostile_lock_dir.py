@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from helpers.commands import CLI, ERROR_PREFIX, HUNG
-from helpers.coordinator import error_lines, ids_seen
+from helpers.commands import CLI, HUNG, the_error_line
+from helpers.coordinator import ids_seen
 from helpers.domains import HIGH_IDS, free_ids
 from helpers.processes import user_keywords
 from ros_isolated_test.domain_coordinator import LOCK_DIR_ENV, POOL_ENV
@@ -103,12 +103,9 @@ def granted_id(result: subprocess.CompletedProcess[str]) -> int:
 
 
 def error_line(result: subprocess.CompletedProcess[str]) -> str:
-    """Exit 3 and exactly one error line on stderr, which is returned."""
+    """Exit 3 and exactly one error line on stderr (the_error_line), which is returned."""
     assert result.returncode == 3, result.stdout + result.stderr
-    lines = error_lines(result.stderr)
-    assert len(lines) == 1, result.stderr
-    assert lines[0].startswith(ERROR_PREFIX), lines[0]
-    return lines[0]
+    return the_error_line(result)
 
 
 def shared_env(env: dict[str, str], lock_dir: Path, *pool: int) -> dict[str, str]:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from lxml import etree
 
-from helpers import jenkins_junit10
+from helpers import jenkins_junit10, xunit
 from helpers.commands import run_cli
 from helpers.processes import Children, poll_until
 from ros_isolated_test.domain_coordinator.queue import Queue
@@ -68,7 +68,8 @@ def root_of(path: Path) -> etree._Element:
 
 
 def properties_of(path: Path) -> dict[str, str]:
-    return {item.get("name", ""): item.get("value", "") for item in root_of(path).iter("property")}
+    """The properties of the result file at ``path`` (every attempt's, as written)."""
+    return xunit.properties_of(root_of(path))
 
 
 def valid(path: Path) -> etree._Element:

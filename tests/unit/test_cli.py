@@ -14,8 +14,8 @@ import os
 from pathlib import Path
 
 import pytest
-from helpers.cli_runs import TOUCH, one_error_line
-from helpers.commands import run_cli, run_runner
+from helpers.cli_runs import TOUCH
+from helpers.commands import run_cli, run_runner, the_error_line
 from helpers.results import load_result
 
 # --- A.2: an unknown option before the command is a typo, never the command ----------------------
@@ -33,7 +33,7 @@ def test_a_mistyped_option_is_a_usage_error_and_nothing_runs(
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
     assert "Running with ROS_DOMAIN_ID" not in proc.stdout
-    line = one_error_line(proc.stderr)
+    line = the_error_line(proc)
     assert "--junit-xlm" in line and "--junit-xml" in line  # named, and the close match
     case = load_result(result).only
     assert case.outcome == "error"
@@ -47,7 +47,7 @@ def test_a_mistyped_option_without_a_result_file_is_one_line(
     proc = run_cli(["run", "--junit-xlm", "out.xml", "--", *TOUCH], env, cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
-    assert "--junit-xlm" in one_error_line(proc.stderr)
+    assert "--junit-xlm" in the_error_line(proc)
 
 
 @pytest.mark.parametrize("separator", [["--"], []])
@@ -91,7 +91,7 @@ def test_nan_and_inf_are_refused_naming_the_option_only(
     )
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
-    line = one_error_line(proc.stderr)
+    line = the_error_line(proc)
     assert option in line, line
     assert "ROS_ISOLATED_TEST_WAIT_TIMEOUT" not in line, line
     assert load_result(result).only.outcome == "error"
@@ -129,7 +129,7 @@ def test_an_option_word_where_a_path_belongs_is_a_usage_error(
     proc = run_cli(["run", *options, *TOUCH], env, cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert "Running with ROS_DOMAIN_ID" not in proc.stdout
-    line = one_error_line(proc.stderr)
+    line = the_error_line(proc)
     option = options[0].split("=")[0]
     assert f"'{option}': needs a path" in line, line
     assert set(tmp_path.iterdir()) == before  # nothing ran, no file `--` or `--timeout`
@@ -169,7 +169,7 @@ def test_a_usage_error_is_one_line_with_one_prefix_and_no_doubled_punctuation(
     else:
         proc = run_runner(runner_script, args, env, cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
-    line = one_error_line(proc.stderr)
+    line = the_error_line(proc)
     assert line.startswith(PREFIX), line
     said = line.removeprefix(PREFIX)
     assert says in said, line

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.cli_runs import TOUCH, one_error_line
-from helpers.commands import BIN, CLI, HUNG, ament, ament_args, run_cli
+from helpers.cli_runs import TOUCH
+from helpers.commands import BIN, CLI, HUNG, ament, ament_args, run_cli, the_error_line
 from helpers.results import load_result
 
 
@@ -270,7 +270,7 @@ def test_output_file_equal_to_the_result_file_is_a_usage_error(
         proc = ament(runner_script, Path(result), TOUCH, env, "--output-file", output, cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
-    line = one_error_line(proc.stderr)
+    line = the_error_line(proc)
     assert "--output-file" in line and "result file" in line, line
     assert load_result(tmp_path / "r.xml").only.outcome == "error"
 
