@@ -102,6 +102,24 @@ if [[ ${ROS_ISOLATED_TEST_NO_KILTED:-} != 1 && ! -f $kilted_stamp ]]; then
   touch "$kilted_stamp"
 fi
 
+# colcon's domain-ID coordinator (a colcon extension) apart from .venv, in
+# .venv/colcon-coordinator: only a colcon given that folder on PYTHONPATH loads it
+# (tests/e2e/test_colcon_coordinator.py). Installed into .venv itself, it would set
+# ROS_DOMAIN_ID for every colcon run of the suite.
+coordinator=colcon-ros-domain-id-coordinator==0.2.4
+coordinator_stamp=.venv/colcon-coordinator/.installed-${coordinator}
+if [[ -x .venv/bin/python && ! -f $coordinator_stamp ]]; then
+  echo "setup: installing $coordinator into .venv/colcon-coordinator"
+  rm -rf .venv/colcon-coordinator
+  log=.venv/install-coordinator.log
+  if ! .venv/bin/python -m pip install -q --no-deps --target .venv/colcon-coordinator "$coordinator" >"$log" 2>&1; then
+    grep -v '^WARNING: Location' "$log" >&2
+    echo "setup: pip install failed (full log: $log)" >&2
+    exit 1
+  fi
+  touch "$coordinator_stamp"
+fi
+
 # What a Jazzy user on Ubuntu 24.04 has, in .venv-distro: ROS 2 Jazzy (the ros extra) and
 # colcon on exactly the setuptools, click, filelock and lxml Ubuntu ships
 # (scripts/ubuntu-24.04-constraints.txt), and NOT this project: tests/e2e/test_ros_package.py

@@ -19,10 +19,17 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import participants, port_guard, records, squatters
+from ros_isolated_test.domain_coordinator import (
+    participants,
+    port_guard,
+    records,
+    squatters,
+    upstream,
+)
 from ros_isolated_test.domain_coordinator.block import blocking_survivors
 from ros_isolated_test.domain_coordinator.lock_files import probe_lock
 from ros_isolated_test.domain_coordinator.queue import Queue, Waiter
@@ -38,14 +45,19 @@ _LOCK_NAME = re.compile(r"domain-([0-9]+)(?:\.uid[0-9]+)?\.lock")
 class DomainUse:
     """One ID in use, and by what.
 
-    ``via`` is ``lock`` (a runner), ``port``, ``participant``, ``environment`` or
-    ``survivor``; ``ports`` are a participant's UDP ports (its owner is not known).
+    ``via`` is ``lock`` (a runner), ``port``, ``participant``, ``environment`` (a
+    squatter), ``survivor``, or the upstream coordinator whose port holds it and whose
+    process set the ID for what it started (``upstream.COLCON``, ``UPSTREAM``,
+    ``FIXTURE``: the holder is that tool's process); ``ports`` are a participant's UDP
+    ports (its owner is not known). ``replaced``: a runner's test was given this ID in
+    place of a tool's (``14 (colcon's domain-ID coordinator)``), else empty.
     """
 
     domain_id: int
     via: str
     holder: records.Holder | None
     ports: tuple[int, ...] = ()
+    replaced: str = ""
 
 
 def domain_uses(lock_dir: Path, pool: tuple[int, ...]) -> list[DomainUse]:
@@ -71,12 +83,19 @@ def domain_uses(lock_dir: Path, pool: tuple[int, ...]) -> list[DomainUse]:
     named = {survivor.pid for found_here in survivors.values() for survivor in found_here}
     for domain_id in sorted(candidates):
         holders: set[int] = set()
+        tools: set[int] = set()  # squatters whose ID a tool set and holds for them
         if probe_lock(lock_dir, domain_id):
             found_records = records.read_records(lock_dir, domain_id)
-            uses.append(DomainUse(domain_id, "lock", found_records[0] if found_records else None))
+            holder = found_records[0] if found_records else None
+            replaced = "" if holder is None else _replaced(holder.pid, domain_id)
+            uses.append(DomainUse(domain_id, "lock", holder, replaced=replaced))
             holders = {record.pid for record in found_records}
         elif port_guard.port_is_taken(domain_id):
-            uses.append(DomainUse(domain_id, "port", None))
+            setters = _setters(found.get(domain_id, []), domain_id)
+            tools = set(setters)
+            uses.extend(_tool_use(setter) for setter in _unique_setters(setters.values()))
+            if not setters:
+                uses.append(DomainUse(domain_id, "port", None))
         elif domain_id in bound:  # a holder's own test is a participant too: not listed
             uses.append(DomainUse(domain_id, "participant", None, tuple(bound[domain_id])))
         for squatter in found.get(domain_id, ()):
@@ -84,6 +103,8 @@ def domain_uses(lock_dir: Path, pool: tuple[int, ...]) -> list[DomainUse]:
                 continue  # a survivor, listed below
             if holders & squatters.ancestors(squatter.pid):
                 continue  # the holder's own test, not a squatter
+            if squatter.pid in tools:
+                continue  # started by a tool that holds the ID: listed as that tool
             uses.append(
                 DomainUse(
                     domain_id,
@@ -101,6 +122,51 @@ def domain_uses(lock_dir: Path, pool: tuple[int, ...]) -> list[DomainUse]:
         for survivor in survivors[domain_id]:
             uses.append(DomainUse(domain_id, "survivor", _survivor(domain_id, survivor)))
     return uses
+
+
+def _setters(found: list[squatters.Squatter], domain_id: int) -> dict[int, upstream.Setter]:
+    """Each process carrying ``domain_id`` that a tool holding it gave it, by PID."""
+    setters: dict[int, upstream.Setter] = {}
+    for squatter in found:
+        setter = upstream.setter_of(squatter.pid)
+        if setter is not None and setter.domain_id == domain_id:
+            setters[squatter.pid] = setter
+    return setters
+
+
+def _unique_setters(setters: Iterable[upstream.Setter]) -> list[upstream.Setter]:
+    """Each tool once, though it started several processes on its ID."""
+    return list({setter.pid: setter for setter in setters}.values())
+
+
+def _tool_use(setter: upstream.Setter) -> DomainUse:
+    """An ID an upstream coordinator holds, named by its process (colcon, upstream's runner)."""
+    stat = proc.read_stat(setter.pid)
+    return DomainUse(
+        setter.domain_id,
+        setter.kind,
+        records.Holder(
+            domain_id=setter.domain_id,
+            pid=setter.pid,
+            user=records.user_name(proc.owner_uid(setter.pid)),
+            command=display_text(setter.command or "?"),
+            started=proc.started_at(stat) if stat is not None else 0.0,
+            host="",
+        ),
+    )
+
+
+def _replaced(pid: int, domain_id: int) -> str:
+    """The tool's ID that runner ``pid``'s test got ``domain_id`` in place of, if any.
+
+    The runner started with the tool's ID in its environment (it replaced it for the
+    test), and the tool still holds it.
+    """
+    value = upstream.variable(proc.environ(pid))
+    if value is None or squatters.domain_value(value) == domain_id:
+        return ""
+    setter = upstream.setter_of(pid, value)
+    return "" if setter is None else f"{setter.value} ({setter.short})"
 
 
 def _unique(survivors: list[proc.Stat]) -> list[proc.Stat]:
@@ -134,6 +200,7 @@ def pool_usage(lock_dir: Path, pool: tuple[int, ...], limit: int = 8) -> tuple[i
     for item in items[:limit]:
         if item.holder is not None:
             kind = {"environment": "squatter ", "survivor": "survivor "}.get(item.via, "")
+            kind = f"{upstream.SHORT[item.via]} " if item.via in upstream.SHORT else kind
             parts.append(
                 f"{item.domain_id}: {kind}pid {item.holder.pid} ({item.holder.user}) "
                 f"{item.holder.command[:60]}"

@@ -132,6 +132,17 @@ def cmdline(pid: int | str) -> str:
     return raw.replace(b"\0", b" ").decode("utf-8", "replace")
 
 
+def argv(pid: int | str) -> list[str]:
+    """The command line's arguments; empty for a zombie, a kernel thread, or one gone."""
+    raw = _read(f"/proc/{pid}/cmdline").rstrip(b"\0")
+    return [arg.decode("utf-8", "replace") for arg in raw.split(b"\0")] if raw else []
+
+
+def maps(pid: int | str) -> bytes:
+    """The process's memory map (which shared libraries it loaded); empty when unreadable."""
+    return _read(f"/proc/{pid}/maps")
+
+
 def boot_time() -> float:
     """When the machine booted (epoch seconds): turns start ticks into a time of day."""
     for line in _read("/proc/stat").splitlines():

@@ -56,7 +56,7 @@ def attempt(
     PoolExhaustedError or LockDirError (no ID), CapacityConflictError, RefusedError
     (namespaces that cannot be had), or Interrupted (a signal before it started).
     """
-    command = command_of(request, config, result, number)
+    command = policy.wrapped(command_of(request, config, result, number))
     with isolation(policy, config, command, capture.note) as held:
         domain_id = None if held is None else held.domain_id
         reserved = held is None or held.reserved

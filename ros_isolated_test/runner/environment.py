@@ -17,7 +17,7 @@ import os
 from collections.abc import Mapping, Sequence
 
 from ros_isolated_test.domain_coordinator.resources import RESOURCES_ENV
-from ros_isolated_test.runner import discovery, partition
+from ros_isolated_test.runner import discovery, partition, rmw_fixture
 from ros_isolated_test.runner.request import EnvAssignment
 from ros_isolated_test.runner.settings import (
     DISABLE_VAR,
@@ -31,6 +31,7 @@ from ros_isolated_test.runner.settings import (
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
+    from ros_isolated_test.domain_coordinator.upstream import Setter
     from ros_isolated_test.process.namespace_diagnosis import Problem
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
@@ -65,11 +66,13 @@ class Policy:
         "discovery",
         "env",
         "fallback",
+        "fixture",
         "gz_partition",
         "isolate",
         "mode",
         "namespaces",
         "notes",
+        "replaced",
     )
 
     def __init__(
@@ -83,6 +86,8 @@ class Policy:
         mode: str = "domain",
         fallback: str | None = None,
         asked: str = "",
+        replaced: Setter | None = None,
+        fixture: rmw_fixture.Fixture | None = None,
     ) -> None:
         #: Reserve a domain ID (False only with DISABLE_ROS_ISOLATION).
         self.isolate = isolate
@@ -102,6 +107,11 @@ class Policy:
         self.fallback = fallback
         #: How the mode was asked for (``--isolation namespace``, the variable), for messages.
         self.asked = asked
+        #: The tool (colcon's domain-ID coordinator, upstream's runner or Kilted's fixture)
+        #: whose ROS_DOMAIN_ID the test's own ID replaces; None when none was set.
+        self.replaced = replaced
+        #: What is done about Kilted's rmw_test_fixture in the test (None: isolation off).
+        self.fixture = fixture
 
     def refusal(self, error: OSError) -> RefusedError:
         """The refusal for namespaces the test could not enter when it was started.
@@ -123,10 +133,16 @@ class Policy:
         """The test's Gazebo partition on ``domain_id``, held by this process (None: none set)."""
         return partition.for_this_runner(domain_id) if self.gz_partition else None
 
+    def wrapped(self, command: Sequence[str]) -> tuple[str, ...]:
+        """The command the test is started with: under the RMW's own fixture where it needs one."""
+        return tuple(command) if self.fixture is None else self.fixture.wrapped(command)
+
     def for_domain(self, domain_id: int) -> dict[str, str]:
         """The test's environment once ``domain_id`` is held."""
         env = self.discovery.apply(self.env) if self.discovery is not None else self.env
         env = {**env, DOMAIN_VAR: str(domain_id), HELD_VAR: str(domain_id)}
+        if self.fixture is not None:
+            env.update(self.fixture.variables())
         name = self.partition_for(domain_id)
         if name is not None:
             env.update(partition.variables(name))
@@ -205,15 +221,16 @@ def decide(
                 f"{env_origin} (the runner picks a free ID), or add {DISABLE_VAR}=1 to "
                 f"{env_origin} (or the runner's environment) to run without isolation"
             )
-        if DOMAIN_VAR in environ:
-            value = environ[DOMAIN_VAR]
-            meaning = " (empty: ROS reads it as domain 0)" if not value.strip() else ""
-            raise RefusedError(
-                f"refusing to run: {DOMAIN_VAR} is already set to {value!r}{meaning}, so the "
-                f"test would share that domain with whatever else runs in it; unset it "
-                f"(unset {DOMAIN_VAR}) and the runner picks a free ID, or set "
-                f"{DISABLE_VAR}=1 to run without isolation"
+        replaced = _tool_domain(environ) if DOMAIN_VAR in environ else None
+        if DOMAIN_VAR in environ and replaced is None:
+            raise RefusedError(_preset_refusal(environ[DOMAIN_VAR]))
+        if replaced is not None and replaced.own_value is not None:
+            # A user's export that the tool put aside: still the user's, refused as ever.
+            where = (
+                f" where {replaced.short} runs (it gave this task {replaced.value} in its place)"
             )
+            raise RefusedError(_preset_refusal(replaced.own_value, where))
+        env.pop(DOMAIN_VAR, None)
         if gz_partition:
             _refuse_preset_partition(assignments, environ, env_origin)
         confined = discovery.decide(env, settings.discovery_range)
@@ -228,6 +245,8 @@ def decide(
             mode=mode,
             fallback=fallback,
             asked=asked,
+            replaced=replaced,
+            fixture=rmw_fixture.decide(env),
         )
     domain = env.get(DOMAIN_VAR)
     where = f"{DOMAIN_VAR}={domain}" if domain is not None else f"{DOMAIN_VAR} unset (domain 0)"
@@ -246,6 +265,30 @@ def decide(
             "without namespaces"
         )
     return Policy(isolate=False, env=env, notes=(*notes, *warnings), mode=mode, asked=asked)
+
+
+def _preset_refusal(value: str, where: str = "") -> str:
+    """The refusal of a ROS_DOMAIN_ID someone set: the same words wherever it was set."""
+    meaning = " (empty: ROS reads it as domain 0)" if not value.strip() else ""
+    return (
+        f"refusing to run: {DOMAIN_VAR} is already set to {value!r}{meaning}{where}, so the "
+        f"test would share that domain with whatever else runs in it; unset it "
+        f"(unset {DOMAIN_VAR}) and the runner picks a free ID, or set "
+        f"{DISABLE_VAR}=1 to run without isolation"
+    )
+
+
+def _tool_domain(environ: Mapping[str, str]) -> Setter | None:
+    """The tool that set this process's ROS_DOMAIN_ID for it and holds that ID, if one did.
+
+    colcon's domain-ID coordinator, upstream's runner or Kilted's fixture: an ID of
+    theirs is replaced by one of the pool (``domain_coordinator.upstream``: how it is
+    told from a user's export, which is refused). Only when ``environ`` is this process's
+    own: the evidence is in /proc.
+    """
+    from ros_isolated_test.domain_coordinator import upstream
+
+    return upstream.setter_of(os.getpid(), environ[DOMAIN_VAR])
 
 
 def _isolation_wanted(

@@ -14,8 +14,16 @@ from ros_isolated_test.domain_coordinator.resources import describe
 from ros_isolated_test.domain_coordinator.status import DomainUse, MachineStatus, anonymous_holder
 from ros_isolated_test.runner import partition
 
-#: HELD BY for each kind of use (the others show as they are named).
-_KINDS = {"lock": "runner", "port": "port", "environment": "squatter"}
+#: HELD BY for each kind of use (the others show as they are named): an upstream
+#: coordinator's ID (its port held, its process named) as that coordinator's.
+_KINDS = {
+    "lock": "runner",
+    "port": "port",
+    "environment": "squatter",
+    "colcon": "colcon",
+    "upstream": "upstream",
+    "fixture": "rmw fixture",
+}
 
 
 def gz_partition(use: DomainUse) -> str | None:
@@ -37,6 +45,7 @@ def as_json(status: MachineStatus) -> str:
             **(use.holder.as_dict() if use.holder else {}),
             **({"gz_partition": gz} if (gz := gz_partition(use)) else {}),
             **({"ports": list(use.ports)} if use.ports else {}),
+            **({"replaced": use.replaced} if use.replaced else {}),
         }
         for use in status.uses
     ]
@@ -87,11 +96,20 @@ def _uses(uses: list[DomainUse]) -> list[str]:
             )
             continue
         holder = use.holder
+        # A runner whose test got this ID in place of a tool's (colcon's coordinator).
+        replaced = f"[replaced {_owner(use.replaced)}] " if use.replaced else ""
         lines.append(
             f"{use.domain_id:>3}  {kind:<11} {holder.pid:>7}  {holder.user:<10.10} "
-            f"{holder.started_iso:<19}  {gz:<{width}}  {holder.command}"
+            f"{holder.started_iso:<19}  {gz:<{width}}  {replaced}{holder.command}"
         )
     return lines
+
+
+def _owner(replaced: str) -> str:
+    """``colcon's ROS_DOMAIN_ID 14`` for ``14 (colcon's domain-ID coordinator)``."""
+    value, _, tool = replaced.partition(" (")
+    owner = tool.split("'s ", 1)[0] if "'s " in tool else tool.rstrip(")")
+    return f"{owner}'s ROS_DOMAIN_ID {value}"
 
 
 def _resources(status: MachineStatus) -> list[str]:

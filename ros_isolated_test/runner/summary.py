@@ -39,7 +39,27 @@ def header_line(policy: environment.Policy, domain_id: int, reserved: bool = Tru
         )
     elif policy.fallback is not None:
         line += "; isolation auto: by the domain ID alone, no namespaces (see below)"
+    if policy.replaced is not None:
+        line += f", replacing ROS_DOMAIN_ID {policy.replaced.value} of {policy.replaced.short}"
     return line
+
+
+def replaced_summary(
+    policy: environment.Policy, domain_id: int
+) -> tuple[list[str], dict[str, str]]:
+    """Why a tool's ID was replaced: the line after the header, and its property."""
+    setter = policy.replaced
+    if setter is None:
+        return [], {}
+    why = {
+        "colcon": "which gives one ID to all tests of a package, tests ctest runs at once",
+    }.get(setter.kind, "an ID chosen outside the pool our runners share")
+    text = (
+        f"ROS_DOMAIN_ID {setter.value} was set by {setter.name}, pid {setter.pid}, {why}: "
+        f"replaced by {domain_id}, an ID of this test's own; {setter.value} stays "
+        f"{setter.short.split(' ', 1)[0]} while it holds it"
+    )
+    return [text], {"ros_domain_id_replaced": f"{setter.value}: {text}"}
 
 
 def resources_summary(held: Lease, config: settings.Settings) -> tuple[str, dict[str, str]]:
@@ -83,6 +103,9 @@ def summary(
         more, isolated = isolation_summary(policy, domain_id, reserved)
         lines.extend(more)
         properties.update(isolated)
+        for part in (replaced_summary(policy, domain_id), _fixture_summary(policy, domain_id)):
+            lines.extend(part[0])
+            properties.update(part[1])
         if config is not None and config.notes:
             lines.extend(config.notes)
             properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
@@ -131,3 +154,12 @@ def isolation_summary(
     if policy.mode != "domain":
         return [], {"isolation": policy.mode}
     return [], {}
+
+
+def _fixture_summary(
+    policy: environment.Policy, domain_id: int
+) -> tuple[list[str], dict[str, str]]:
+    """What was done about Kilted's rmw_test_fixture, unless the silent default."""
+    if policy.fixture is None:
+        return [], {}
+    return policy.fixture.summary(domain_id)

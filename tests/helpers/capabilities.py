@@ -274,6 +274,20 @@ def _upstream_runner() -> str | None:
     )
 
 
+#: colcon's domain-ID coordinator, installed apart from the venv's site-packages (scripts/setup.sh):
+#: a colcon loads it only when given this folder on PYTHONPATH.
+COLCON_COORDINATOR_DIR = Path(sys.prefix) / "colcon-coordinator"
+
+
+def _colcon_coordinator() -> str | None:
+    if (COLCON_COORDINATOR_DIR / "colcon_ros_domain_id_coordinator").is_dir():
+        return None
+    return (
+        f"needs colcon-ros-domain-id-coordinator in {COLCON_COORDINATOR_DIR} "
+        "(scripts/setup.sh installs it there)"
+    )
+
+
 def _kilted() -> str | None:
     """ROS 2 Kilted in .venv-kilted, whose Python imports rclpy (see helpers/distros.py)."""
     from helpers.distros import KILTED
@@ -378,6 +392,8 @@ UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
 DISTRO_VENV = Capability("ubuntu-24.04-venv", _distro_venv)
 #: cmake and ctest, to run a registered test under ctest's TIMEOUT.
 CTEST = Capability("ctest", _ctest)
+#: colcon's domain-ID coordinator, for the tests that run colcon with it active.
+COLCON_COORDINATOR = Capability("colcon-coordinator", _colcon_coordinator)
 #: ROS 2 Kilted's venv (.venv-kilted, made by scripts/setup.sh), for the Kilted tier.
 KILTED = Capability("kilted", _kilted)
 #: Gazebo's transport CLI (Debian's ignition-transport-cli), for the simulation isolation tests.
