@@ -63,6 +63,28 @@ print("locked", flush=True)
 sys.stdin.read()
 """
 
+#: A stand-in for colcon with its domain-ID coordinator, saved as a file named ``colcon``:
+#: holds port 32768+argv[1] unless argv[2] is "free", sets ROS_DOMAIN_ID=argv[1] in its own
+#: environment, as the coordinator does in colcon's, and runs argv[3:] (stdin passed on).
+COLCON_SCRIPT = """
+import os, subprocess, sys
+from ros_isolated_test.domain_coordinator.port_guard import claim_port
+port = claim_port(int(sys.argv[1])) if sys.argv[2] != "free" else None
+assert sys.argv[2] == "free" or port is not None, "port taken"
+os.environ["ROS_DOMAIN_ID"] = sys.argv[1]
+sys.exit(subprocess.call(sys.argv[3:]))
+"""
+#: A test command that prints its PID and ROS_DOMAIN_ID, then waits for its stdin to close.
+WAIT_SCRIPT = 'echo "pid=$$ id=$ROS_DOMAIN_ID"; read -r stop'
+
+
+def stand_in_colcon(folder: Path) -> Path:
+    """:data:`COLCON_SCRIPT` as ``folder/colcon``, run as ``python folder/colcon ID hold CMD``."""
+    path = folder / "colcon"
+    path.write_text(COLCON_SCRIPT)
+    return path
+
+
 #: A test command that prints the ID it was given.
 PRINT_ID = 'echo "id=$ROS_DOMAIN_ID"'
 #: The columns of ``status``'s table, as a user reads its header (unit and e2e tests alike).

@@ -16,14 +16,16 @@ import os
 import pwd
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.commands import HUNG, run_cli, start_cli
+from helpers.commands import HUNG, ament_args, run_cli, start_cli
 from helpers.coordinator import (
     UPSTREAM_SCRIPT,
+    WAIT_SCRIPT,
     status_rows,
     wait_for_environment,
     without_domain_id,
@@ -40,6 +42,7 @@ from ros_isolated_test.domain_coordinator import (
     DomainUse,
     domain_uses,
 )
+from ros_isolated_test.domain_coordinator.port_guard import claim_port
 
 #: A user ID nobody has here.
 UNNAMED = 4242
@@ -238,3 +241,49 @@ def test_a_survivor_is_listed_once_as_a_survivor_and_a_plain_squatter_as_a_squat
     # do not block it).
     assert waiter.wait(HUNG) == 0, log.read_text()
     assert f"Running with ROS_DOMAIN_ID {domain_id}" in log.read_text()
+
+
+@capabilities.UPSTREAM_RUNNER
+def test_a_test_of_upstreams_runner_is_upstreams_not_a_squatter(
+    lock_dir: Path, env: dict[str, str], children: Children, tmp_path: Path
+) -> None:
+    """Jazzy's run_test_isolated.py, real, holds the ID's port and set the ID for its
+    test: the ID is upstream's, named by the runner's process; its test is no squatter.
+
+    The control, at the same time: a process on another ID whose port an unrelated
+    program holds is still a squatter beside the port, not upstream's.
+    """
+    runner = str(capabilities.UPSTREAM_RUNNER_PATH)
+    args = ament_args(tmp_path / "r.xml", ["sh", "-c", WAIT_SCRIPT])
+    upstream_runner = children.start([sys.executable, "-u", runner, *args], env=env)
+    line = children.first_line(upstream_runner)
+    while not line.startswith("pid="):
+        line = children.first_line(upstream_runner)
+    test_pid, domain_id = (int(part.split("=", 1)[1]) for part in line.split())
+    wait_for_environment(test_pid, domain_id)
+    (other_id,) = free_ids(1, [i for i in range(1, 233) if i != domain_id])
+    port = claim_port(other_id)
+    assert port is not None
+    try:
+        squatter = children.start(
+            ["sh", "-c", WAIT_SCRIPT], env={**env, "ROS_DOMAIN_ID": str(other_id)}
+        )
+        wait_for_environment(squatter.pid, other_id)
+        uses = domain_uses(lock_dir, (domain_id, other_id))
+        env[POOL_ENV] = f"{domain_id},{other_id}"
+        table = run_cli(["status"], env).stdout
+    finally:
+        port.close()
+    named = [(use.domain_id, use.via, use.holder.pid if use.holder else None) for use in uses]
+    assert named == [
+        (domain_id, "upstream", upstream_runner.pid),
+        (other_id, "port", None),
+        (other_id, "environment", squatter.pid),
+    ]
+    assert uses[0].holder is not None and "run_test_isolated.py" in uses[0].holder.command
+    rows = [tuple(line.split()[:2]) for line in table.splitlines()[1:]]
+    assert rows == [
+        (str(domain_id), "upstream"),
+        (str(other_id), "port"),
+        (str(other_id), "squatter"),
+    ], table

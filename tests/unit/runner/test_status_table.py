@@ -157,3 +157,33 @@ def test_status_shows_the_gazebo_partition_a_held_run_gave_its_test(
     assert "GZ_PARTITION" in table.splitlines()[0], table
     (line,) = [line for line in table.splitlines() if f" {holder.pid} " in line]
     assert f" {name} " in line, table
+
+
+def test_an_upstream_coordinators_id_is_named_as_its_and_a_replacement_beside_the_runner() -> None:
+    """colcon's coordinator, upstream's runner, Kilted's fixture: each named as itself (a
+    squatter otherwise); a runner whose test got its ID in place of colcon's says so."""
+    colcon = Holder(11, 700, "alice", "colcon test", NOON, "")
+    runner = Holder(12, 701, "alice", "python3 run_test_isolated.py r.xml", NOON, "h")
+    uses = [
+        DomainUse(11, "colcon", colcon),
+        DomainUse(12, "lock", runner, replaced="11 (colcon's domain-ID coordinator)"),
+        DomainUse(13, "upstream", Holder(13, 702, "bob", "python3 run_test_isolated.py", NOON, "")),
+        DomainUse(14, "fixture", Holder(14, 703, "bob", "run_rmw_isolated sh", NOON, "")),
+        DomainUse(15, "lock", RUNNER),  # the control: no replacement, nothing said
+    ]
+    _, *rows = table(_status(uses)).splitlines()
+    assert [row.split()[:3] for row in rows] == [
+        ["11", "colcon", "700"],
+        ["12", "runner", "701"],
+        ["13", "upstream", "702"],
+        ["14", "rmw", "fixture"],
+        ["15", "runner", "4242"],
+    ]
+    assert rows[1].endswith(
+        "[replaced colcon's ROS_DOMAIN_ID 11] python3 run_test_isolated.py r.xml"
+    )
+    assert rows[4].endswith("  ros2 test pkg")
+    data = json.loads(as_json(_status(uses)))
+    assert data[1]["replaced"] == "11 (colcon's domain-ID coordinator)"
+    assert [row.get("replaced") for row in data if row is not data[1]] == [None] * 4
+    assert [row["via"] for row in data] == ["colcon", "lock", "upstream", "fixture", "lock"]
