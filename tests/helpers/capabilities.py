@@ -288,6 +288,10 @@ def _colcon_coordinator() -> str | None:
     )
 
 
+def _gcc() -> str | None:
+    return None if shutil.which("gcc") is not None else "needs gcc (Debian's gcc)"
+
+
 def _kilted() -> str | None:
     """ROS 2 Kilted in .venv-kilted, whose Python imports rclpy (see helpers/distros.py)."""
     from helpers.distros import KILTED
@@ -392,6 +396,8 @@ UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
 DISTRO_VENV = Capability("ubuntu-24.04-venv", _distro_venv)
 #: cmake and ctest, to run a registered test under ctest's TIMEOUT.
 CTEST = Capability("ctest", _ctest)
+#: A C compiler, for a shared library a test builds (a stand-in RMW fixture).
+GCC = Capability("gcc", _gcc)
 #: colcon's domain-ID coordinator, for the tests that run colcon with it active.
 COLCON_COORDINATOR = Capability("colcon-coordinator", _colcon_coordinator)
 #: ROS 2 Kilted's venv (.venv-kilted, made by scripts/setup.sh), for the Kilted tier.
