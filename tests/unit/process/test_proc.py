@@ -90,6 +90,9 @@ def _key(stat: proc.Stat | None) -> tuple[int, int] | None:
 def test_environ_cmdline_and_pids(sleeper: subprocess.Popen[bytes], tmp_path: Path) -> None:
     assert proc.environ(sleeper.pid).split(b"\0")[:2] == [b"MARKER=one two", b"X=y"]
     assert proc.cmdline(sleeper.pid) == f"{tmp_path / AWKWARD_NAME} 600 0"
+    # Its arguments one by one (a space inside one stays in it), and what it loaded.
+    assert proc.argv(sleeper.pid) == [str(tmp_path / AWKWARD_NAME), "600", "0"]
+    assert b"libc" in proc.maps(sleeper.pid)
     found = proc.pids()
     assert str(sleeper.pid) in found and str(os.getpid()) in found
     assert all(name.isdigit() for name in found)
@@ -101,6 +104,7 @@ def test_gone_processes_read_as_empty() -> None:
     assert proc.read_stat(child.pid) is None
     assert proc.environ(child.pid) == b""
     assert proc.cmdline(child.pid) == ""
+    assert proc.argv(child.pid) == [] and proc.maps(child.pid) == b""
     assert proc.owner_uid(child.pid) is None
 
 

@@ -15,19 +15,27 @@ the policy is in test_environment_partition.py.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from helpers.commands import (
+    CLI,
     ERROR_PREFIX,
     MODES,
     ament,
+    ament_args,
+    run_process,
     the_error_line,
     through,
 )
+from helpers.coordinator import stand_in_colcon
 from helpers.distros import Tools
+from helpers.domains import free_ids
 from helpers.results import load_result
 
+from ros_isolated_test.domain_coordinator.pool import POOL_ENV
 from ros_isolated_test.runner import environment, settings
 from ros_isolated_test.runner.environment import DOMAIN_VAR, HELD_VAR, RefusedError
 from ros_isolated_test.runner.request import EnvAssignment
@@ -35,6 +43,65 @@ from ros_isolated_test.runner.request import EnvAssignment
 WARNING = "WARNING: DISABLE_ROS_ISOLATION is set"
 #: Writes the domain the test saw, so a test can tell it ran and where.
 SEEN = ("sh", "-c", 'echo "${ROS_DOMAIN_ID-unset}" > seen')
+PRINT = ("sh", "-c", 'echo "id=$ROS_DOMAIN_ID"')
+
+
+# --- an ID colcon's coordinator set for the task: a tool's, replaced ------------------------
+
+
+def _under_colcon(
+    mode: str, runner_script: str, env: dict[str, str], tmp_path: Path, colcon_id: int, hold: str
+) -> subprocess.CompletedProcess[str]:
+    """``run`` or the RUNNER started by the colcon stand-in, which set ``colcon_id``."""
+    colcon = [sys.executable, str(stand_in_colcon(tmp_path)), str(colcon_id), hold]
+    if mode == "shell":
+        argv = [CLI, "run", "--junit-xml", str(tmp_path / "t.xml"), "--", *PRINT]
+    else:
+        args = ament_args(tmp_path / "t.xml", PRINT, "--generate-result-on-success")
+        argv = [sys.executable, "-u", runner_script, *args]
+    return run_process([*colcon, *argv], env, cwd=tmp_path)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_an_id_colcons_coordinator_holds_is_replaced_by_one_of_the_pool(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    """The test runs on a pool ID, never colcon's (in the pool too, but held by colcon);
+    the first line and the result file say which ID was replaced, and why. The control:
+    the same colcon not holding the port (no coordinator's ID) is refused as ever."""
+    colcon_id, other = free_ids(2)
+    env[POOL_ENV] = f"{colcon_id},{other}"
+    proc = _under_colcon(mode, runner_script, env, tmp_path, colcon_id, "hold")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"id={other}\n" in proc.stdout
+    first = proc.stdout.splitlines()[0]
+    assert first.startswith(f"Running with ROS_DOMAIN_ID {other} ")
+    assert first.endswith(
+        f", replacing ROS_DOMAIN_ID {colcon_id} of colcon's domain-ID coordinator"
+    )
+    replaced = load_result(tmp_path / "t.xml").properties["ros_domain_id_replaced"]
+    assert replaced.startswith(f"{colcon_id}: ROS_DOMAIN_ID {colcon_id} was set by colcon's ")
+    assert f"replaced by {other}, an ID of this test's own" in replaced
+    control = _under_colcon(mode, runner_script, env, tmp_path, colcon_id, "free")
+    assert control.returncode == 2, control.stdout + control.stderr
+    assert f"ROS_DOMAIN_ID is already set to '{colcon_id}', so" in the_error_line(control)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_users_id_colcon_started_with_is_refused_though_colcon_replaced_it(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    """``ROS_DOMAIN_ID=5 colcon test``: the user's 5, with today's message, and where."""
+    colcon_id = free_ids(1)[0]
+    proc = _under_colcon(mode, runner_script, {**env, DOMAIN_VAR: "5"}, tmp_path, colcon_id, "hold")
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "id=" not in proc.stdout
+    assert the_error_line(proc).removeprefix(ERROR_PREFIX) == (
+        f"refusing to run: ROS_DOMAIN_ID is already set to '5' where colcon's domain-ID "
+        f"coordinator runs (it gave this task {colcon_id} in its place), so the test would "
+        "share that domain with whatever else runs in it; unset it (unset ROS_DOMAIN_ID) and "
+        "the runner picks a free ID, or set DISABLE_ROS_ISOLATION=1 to run without isolation"
+    )
 
 
 # --- a preset ROS_DOMAIN_ID, as users meet it: run and the RUNNER ----------------------------

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import pytest
 
+from ros_isolated_test.domain_coordinator.upstream import COLCON, Setter
 from ros_isolated_test.runner import discovery, environment, partition, settings
 from ros_isolated_test.runner.isolation import Lease
 from ros_isolated_test.runner.summary import (
@@ -131,3 +132,25 @@ def test_what_is_held_besides_the_id_is_said_with_the_capacity_and_the_wait() ->
     line, properties = resources_summary(Lease(5, {"gpu": 1}, waited=2.0), config)
     assert line == "holding gpu=1 of gpu=2 (waited 2.0 s)"
     assert properties == {"resources": "gpu=1", "resources_waited": "2.000", "capacity": "gpu=2"}
+
+
+def test_an_id_replaced_for_a_tool_is_said_on_the_first_line_and_recorded() -> None:
+    """colcon's ID replaced: the first line names it, the next says why, the property both.
+    The control: nothing replaced, nothing said."""
+    colcon = Setter(COLCON, 4242, "colcon test", "14", 14, None)
+    policy = _policy(replaced=colcon)
+    assert header_line(policy, 5).endswith(
+        ", replacing ROS_DOMAIN_ID 14 of colcon's domain-ID coordinator"
+    )
+    lines, properties = summary(policy, 5)
+    said = [line for line in lines if line.startswith("ROS_DOMAIN_ID 14 was set by")]
+    assert said == [
+        "ROS_DOMAIN_ID 14 was set by colcon's domain-ID coordinator "
+        "(colcon-ros-domain-id-coordinator), pid 4242, which gives one ID to all tests of a "
+        "package, tests ctest runs at once: replaced by 5, an ID of this test's own; 14 stays "
+        "colcon's while it holds it"
+    ]
+    assert properties["ros_domain_id_replaced"] == f"14: {said[0]}"
+    plain = _policy()
+    assert "replacing" not in header_line(plain, 5)
+    assert "ros_domain_id_replaced" not in summary(plain, 5)[1]
