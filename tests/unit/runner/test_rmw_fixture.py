@@ -116,8 +116,8 @@ def _kilted_env(env: dict[str, str], **extra: str) -> dict[str, str]:
 def _kilted_run(
     env: dict[str, str], result: Path, *command: str
 ) -> tuple[subprocess.CompletedProcess[str], int, dict[str, str]]:
-    """Our runner, the Kilted venv's (as its ctest would run it), around ``command``: its output, the ID it printed
-    first, and the result file's properties."""
+    """Our runner, the Kilted venv's (as its ctest runs it), around ``command``: its
+    output, the ID it printed first, and the result file's properties."""
     cli = str(KILTED.bin / "ros-isolated-test")
     done = run_process([cli, "run", "--junit-xml", str(result), "--", *command], env)
     assert done.returncode == 0, done.stdout + done.stderr
