@@ -243,6 +243,7 @@ def test_a_survivor_is_listed_once_as_a_survivor_and_a_plain_squatter_as_a_squat
     assert f"Running with ROS_DOMAIN_ID {domain_id}" in log.read_text()
 
 
+@pytest.mark.ros
 @capabilities.UPSTREAM_RUNNER
 def test_a_test_of_upstreams_runner_is_upstreams_not_a_squatter(
     lock_dir: Path, env: dict[str, str], children: Children, tmp_path: Path

@@ -15,6 +15,7 @@ import os
 import sys
 from pathlib import Path
 
+import pytest
 from helpers import capabilities
 from helpers.commands import ament_args
 from helpers.coordinator import WAIT_SCRIPT, stand_in_colcon, wait_for_environment
@@ -123,6 +124,7 @@ def test_a_value_set_inside_the_asking_process_is_not_a_tools() -> None:
     assert upstream.setter_of(os.getpid()) is None or started_with is not None
 
 
+@pytest.mark.ros
 @capabilities.UPSTREAM_RUNNER
 def test_an_id_upstreams_runner_set_is_upstreams(children: Children, tmp_path: Path) -> None:
     """Jazzy's run_test_isolated.py, real: it binds the port and sets the ID in itself."""
@@ -143,6 +145,7 @@ def test_an_id_upstreams_runner_set_is_upstreams(children: Children, tmp_path: P
     )
 
 
+@pytest.mark.ros
 @capabilities.KILTED
 def test_an_id_kilteds_fixture_set_is_the_fixtures(children: Children) -> None:
     """Kilted's run_rmw_isolated, real: the fixture's library is loaded in the setter."""
