@@ -38,6 +38,8 @@ from __future__ import annotations
 import math
 import os
 import stat
+from itertools import repeat
+from operator import mul
 
 from ros_isolated_test import atomic_file
 from ros_isolated_test.shard.digest import sha256
@@ -296,13 +298,14 @@ def _checked(content: object) -> dict[str, int]:
     # tests in a few milliseconds), test by test only to say which one is wrong.
     values = tests.values()
     if tests and not (
-        {type(value) for value in values} <= {int, float}
+        set(map(type, values)) <= {int, float}
         and min(values) >= 0
         and max(values) <= MAX_SECONDS
-        and all(0 < key.find(SEPARATOR) < len(key) - 1 for key in tests)
+        and min(map(str.find, tests, repeat(SEPARATOR))) > 0  # a package before a "/"
+        and not any(map(str.endswith, tests, repeat(SEPARATOR)))  # a name after it
     ):
-        _first_wrong(tests)
-    return {key: round(value * 1000) for key, value in tests.items()}
+        _first_wrong(tests)  # (or, rarely, a name that ends in "/": then none is wrong)
+    return dict(zip(tests, map(round, map(mul, values, repeat(1000))), strict=True))
 
 
 def _first_wrong(tests: dict[str, object]) -> None:

@@ -33,7 +33,7 @@ from ros_isolated_test.shard.identity import spread
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    from collections.abc import Iterable, Iterator
 
     from ros_isolated_test.shard.durations import Durations
 
@@ -63,7 +63,7 @@ class Placed:
 class Plan:
     """Which of ``total`` shares runs each test, planned from ``durations`` (None: by count)."""
 
-    __slots__ = ("_placed", "durations", "total")
+    __slots__ = ("_placed", "_steps", "durations", "total")
 
     def __init__(self, total: int, durations: Durations | None) -> None:
         if not 1 <= total <= _INDEX_MASK:
@@ -71,7 +71,9 @@ class Plan:
         self.total = total
         #: None, or an empty file: the split is by count (the identity's hash alone).
         self.durations = durations if durations else None
-        self._placed: dict[str, int] | None = None
+        #: The file's tests placed so far, and the placing still to come.
+        self._placed: dict[str, int] = {}
+        self._steps: Iterator[tuple[str, int]] | None = None
 
     @property
     def by_count(self) -> bool:
@@ -86,25 +88,36 @@ class Plan:
         values = sorted(self.durations.millis.values())
         return values[(len(values) - 1) // 2]
 
-    def _plan(self) -> dict[str, int]:
-        """The share of every test of the file: LPT, computed once per process."""
-        if self._placed is None:
-            import heapq
+    def _placing(self, durations: Durations) -> Iterator[tuple[str, int]]:
+        """Each test of the file with its share, longest first (LPT)."""
+        import heapq
 
-            placed: dict[str, int] = {}
-            if self.durations is not None:
-                millis = self.durations.millis
-                # Longest first; equal durations by identity (a stable sort of the sorted
-                # identities): no dict order, no hash.
-                order = sorted(self.durations.ordered(), key=millis.__getitem__, reverse=True)
-                # Each share's load and index in one integer, load << 10 | index (at most
-                # 1000 shares): the least is the least loaded, ties to the lowest index.
-                loads = list(range(1, self.total + 1))  # a heap already
-                for key in order:
-                    least = loads[0]
-                    placed[key] = least & _INDEX_MASK
-                    heapq.heapreplace(loads, least + (millis[key] << _INDEX_BITS))
-            self._placed = placed
+        millis = durations.millis
+        # Longest first; equal durations by identity (a stable sort of the sorted
+        # identities): no dict order, no hash.
+        order = sorted(durations.ordered(), key=millis.__getitem__, reverse=True)
+        # Each share's load and index in one integer, load << 10 | index: the least is
+        # the least loaded share, ties going to the lowest index.
+        loads = list(range(1, self.total + 1))  # a heap already
+        for key in order:
+            least = loads[0]
+            yield key, least & _INDEX_MASK
+            heapq.heapreplace(loads, least + (millis[key] << _INDEX_BITS))
+
+    def _place(self, until: str | None = None) -> dict[str, int]:
+        """The file's tests placed so far, placing them up to ``until`` (None: all).
+
+        A RUNNER asking about one test stops there, half way on average; the plugin asking
+        about each goes on from where it stopped. Each test is placed once per process.
+        """
+        if self.durations is not None and (until is None or until not in self._placed):
+            if self._steps is None:
+                self._steps = self._placing(self.durations)
+            placed = self._placed
+            for key, index in self._steps:
+                placed[key] = index
+                if key == until:
+                    break
         return self._placed
 
     def knows(self, identity: str) -> bool:
@@ -114,7 +127,7 @@ class Plan:
     def share_of(self, identity: str) -> int:
         """The share, from 1 to ``total``, that runs the test ``identity``."""
         if self.knows(identity):
-            return self._plan()[identity]
+            return self._place(identity)[identity]
         return spread(identity, self.total)
 
     def shares(self, found: Iterable[str] = ()) -> list[list[Placed]]:
@@ -125,7 +138,7 @@ class Plan:
         """
         listing: list[list[Placed]] = [[] for _ in range(self.total)]
         if self.durations is not None:
-            for key, index in self._plan().items():
+            for key, index in self._place().items():
                 listing[index - 1].append(Placed(key, self.durations.millis[key], True))
         median = self.median
         for key in sorted(set(found)):

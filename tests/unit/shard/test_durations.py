@@ -256,6 +256,15 @@ def test_a_malformed_file_is_one_line_saying_what_is_wrong(
     assert said in _error(path)
 
 
+def test_a_test_name_may_end_in_a_slash(tmp_path: Path) -> None:
+    path = _file(tmp_path, {"version": 1, "durations": {"pkg/dir/": 1, "pkg/t": 2}})
+    assert load(path).millis == {"pkg/dir/": 1000, "pkg/t": 2000}
+    # Control: a package with no name after its "/" is refused.
+    assert "is not <package>/<test>" in _error(
+        _file(tmp_path, {"version": 1, "durations": {"pkg/": 1}})
+    )
+
+
 def test_the_one_wrong_test_among_many_is_named(tmp_path: Path) -> None:
     tests: dict[str, object] = {f"pkg/t{number}": number / 10 for number in range(5000)}
     path = _file(tmp_path, {"version": 1, "durations": tests})

@@ -87,6 +87,23 @@ def test_longest_first_onto_the_least_loaded_share() -> None:
     assert [plan.share_of(f"p/{name}") for name in "abcde"] == [1, 2, 2, 1, 1]
 
 
+def test_asking_in_any_order_gives_the_whole_plans_answers() -> None:
+    """A RUNNER stops placing at its test; later questions go on from there, alike."""
+    durations = measured(MEASURED)
+    whole = {
+        test.identity: index
+        for index, tests in enumerate(Plan(3, durations).shares(), 1)
+        for test in tests
+    }
+    asked = Plan(3, durations)
+    assert asked.share_of("nav/test_long_0") == whole["nav/test_long_0"]
+    assert len(asked._placed) == 1  # the longest test: placed first, and alone
+    names = sorted(MEASURED)
+    random.Random(5).shuffle(names)
+    assert {name: asked.share_of(name) for name in names} == whole
+    assert len(asked._placed) == len(MEASURED)
+
+
 def test_ties_are_broken_by_identity_never_by_the_files_order() -> None:
     same = {f"p/t{number}": 1.0 for number in range(20)}
     forward = Durations({key: 1000 for key in same})
