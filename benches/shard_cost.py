@@ -1,7 +1,7 @@
 """13. What a share's decision costs a test: reading the split, the durations file, the plan.
 
-A ctest RUNNER runs one test, so with ``ROS_ISOLATED_TEST_SHARD`` set each one reads the
-durations file and plans the whole workspace to answer for its own test. This measures,
+A ctest RUNNER runs one test, so in a split each one reads the durations file and plans
+the workspace's tests to answer for its own. This measures,
 in fresh interpreters of this venv (bytecode cached, as under colcon), the RUNNER's own
 imports (``ros_isolated_test.runner.ament.args``) alone and then with
 ``shard.selection.select`` + ``runs`` + ``properties`` on top: by count (no file), and

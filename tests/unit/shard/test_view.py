@@ -148,12 +148,17 @@ for total in (1, 2, 3, 7):
     sys.stdout.write(view.text(planned, found, "durations.json"))
     sys.stdout.write(view.as_json(planned, found, "durations.json"))
 sys.stdout.write(loaded.fingerprint)
+# What a runner on machine 2 of 3 decides for each test, through the entry points' API.
+from ros_isolated_test.shard import selection
+machine = selection.select({"ROS_ISOLATED_TEST_SHARD": "2/3"}, None, sys.argv[1])
+sys.stdout.write(repr(machine.properties()))
+sys.stdout.write("".join("1" if machine.runs(*test.split("/", 1)) else "0" for test in found))
 """
 
 
 @pytest.fixture(scope="module")
 def plan_inputs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """A durations file of 2,000 tests (ties, odd names) and 300 tests of trees, 50 new."""
+    """A durations file of 2,000 tests (ties, odd names) and 300 found in trees, 50 new."""
     rng = random.Random(37)
     tests = {}
     for number in range(2000):
