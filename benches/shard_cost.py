@@ -35,15 +35,15 @@ TARGET_SECONDS = 0.030
 _ASK = """
 import os, time
 import {baseline}
-start = time.perf_counter()
+start = time.process_time()
 from ros_isolated_test.shard.selection import select
-imported = time.perf_counter()
+imported = time.process_time()
 selection = select(os.environ)
-read = time.perf_counter()
+read = time.process_time()
 selection.runs("pkg_27", "test_77")  # a test the files know
-planned = time.perf_counter()
+planned = time.process_time()
 selection.properties()
-done = time.perf_counter()
+done = time.process_time()
 print(imported - start, read - imported, planned - read, done - planned)
 """
 
@@ -114,7 +114,8 @@ def measure(python: str, base_env: Mapping[str, str], quick: bool, work: Path) -
     section.notes.append(
         f"Python {sys.version.split()[0]}; median of {reps} fresh interpreters each, "
         f"interleaved, against the RUNNER's imports alone ({ms(baseline)}). The inner columns "
-        "are timed inside a separate run of each: importing the shard package (after the "
+        "are CPU time (which waiting for a loaded machine's CPUs does not inflate), taken "
+        "inside a separate run of each: importing the shard package (after the "
         "RUNNER's imports), reading "
         "the variables and the file (`select`), planning (the first `runs`), and the "
         "fingerprint results record (`properties`). Target: a 10,000-test file adds at most "

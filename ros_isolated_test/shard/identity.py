@@ -2,8 +2,9 @@
 
 A CMake test is its package and its ctest test name (``nav2_util/test_lifecycle``); a
 pytest item of an ament_python package is its package and its node id
-(``my_pkg/test/test_talker.py::TestTalker::test_rate[2]``: relative to the package,
-where colcon runs pytest, so the same on every machine). One string form, split at the
+(``my_pkg/test/test_talker.py::TestTalker::test_rate[2]``: relative to pytest's
+rootdir, the package's folder where colcon runs pytest unless an ini file above it says
+otherwise; the same on every machine of one checkout). One string form, split at the
 first ``/``: a package name never holds one (it names a folder of the install tree; ROS
 allows lowercase letters, digits and ``_``), while a test name or node id may hold
 anything, ``/`` and ``::`` included, so the form is unambiguous both ways.
