@@ -42,6 +42,7 @@ import output_volume
 import overhead
 import preset
 import pytest_session
+import shard_cost
 import suite
 import wave_of_tests
 from common import (
@@ -78,6 +79,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "html_report": html_report.run,
     "imports": import_costs.run,
     "namespace": namespace_mode.run,
+    "shard_cost": shard_cost.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"

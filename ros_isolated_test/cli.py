@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ros_isolated_test import __version__
+from ros_isolated_test.cli_shard import shard
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
 from ros_isolated_test.process.supervisor import KILL_GRACE
 from ros_isolated_test.runner import session, settings
@@ -79,6 +80,9 @@ def cli() -> None:
     A machine-wide coordinator on file locks gives every test a free domain ID, so
     tests run at once (colcon test, ctest -j) never hear each other.
     """
+
+
+cli.add_command(shard)
 
 
 def _finite(_ctx: click.Context, param: click.Parameter, value: float | None) -> float | None:

@@ -236,6 +236,34 @@ def _bare_python() -> str | None:
     )
 
 
+def other_python(version: str) -> str | None:
+    """A Python ``version`` (``3.10``): on PATH, else the newest pyenv has; as
+    scripts/py310_smoke.sh finds it (pyenv installs versions it does not put on PATH)."""
+    on_path = shutil.which(f"python{version}")
+    if on_path is not None and _run_ok([on_path, "-c", ""]) is None:
+        return on_path  # (a pyenv shim on PATH fails for a version pyenv has not selected)
+    try:
+        root = subprocess.run(
+            ["pyenv", "root"], capture_output=True, text=True, timeout=30, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    found = sorted(
+        Path(root).glob(f"versions/{version}.*/bin/python{version}"),
+        key=lambda path: [int(part) for part in path.parents[1].name.split(".") if part.isdigit()],
+    )
+    return str(found[-1]) if found else None
+
+
+def _python(version: str) -> Callable[[], str | None]:
+    def check() -> str | None:
+        if other_python(version) is not None:
+            return None
+        return f"needs Python {version} (pyenv install {version}, or python{version} on PATH)"
+
+    return check
+
+
 def _tomllib() -> str | None:
     if importlib.util.find_spec("tomllib") is not None:
         return None
@@ -390,6 +418,9 @@ GMOCK = Capability("gmock", _gmock)
 #: A system python3.11 without filelock (see :func:`bare_python`).
 BARE_PYTHON = Capability("bare-python3.11", _bare_python)
 TOMLLIB = Capability("tomllib", _tomllib)
+#: Other Pythons the product supports (3.10, the oldest; 3.12, Ubuntu 24.04's), run bare.
+PYTHON310 = Capability("python3.10", _python("3.10"))
+PYTHON312 = Capability("python3.12", _python("3.12"))
 FREE_DISK = Capability("free-disk", _free_disk)
 UPSTREAM_RUNNER = Capability("upstream-runner", _upstream_runner)
 #: The distro venv (.venv-distro, made by scripts/setup.sh): Ubuntu 24.04's Python packages.

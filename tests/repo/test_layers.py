@@ -2,7 +2,8 @@
 
 The layers, highest first (``LAYERS``): the entry points (the CLI; the pytest plugin
 with its launch cases), then ``runner``, then ``domain_coordinator``, then ``process``
-and ``xunit``, then at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``
+and ``xunit``, then ``shard`` (splitting tests over machines: all the above read it),
+then at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``
 and the package's own ``__init__`` (its version). A module imports within its own unit (a
 package, or the modules named together below) or from any lower layer, never from a
 higher one. Two units of one layer do not import each other: ``process`` and ``xunit``
@@ -31,6 +32,7 @@ PACKAGE = REPO / "ros_isolated_test"
 LAYERS = (
     {
         "cli": "cli",
+        "cli_shard": "cli",
         "__main__": "cli",
         "pytest_plugin": "pytest plugin",
         "plugin_options": "pytest plugin",
@@ -40,6 +42,7 @@ LAYERS = (
     {"runner": "runner"},
     {"domain_coordinator": "domain_coordinator"},
     {"process": "process", "xunit": "xunit"},
+    {"shard": "shard"},
     {
         "": "bottom",
         "atomic_file": "bottom",

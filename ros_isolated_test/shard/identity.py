@@ -1,0 +1,58 @@
+"""A test's identity across machines and runs: ``<package>/<test>``, and its stable share.
+
+A CMake test is its package and its ctest test name (``nav2_util/test_lifecycle``); a
+pytest item of an ament_python package is its package and its node id
+(``my_pkg/test/test_talker.py::TestTalker::test_rate[2]``: relative to pytest's
+rootdir, the package's folder where colcon runs pytest unless an ini file above it says
+otherwise; the same on every machine of one checkout). One string form, split at the
+first ``/``: a package name never holds one (it names a folder of the install tree; ROS
+allows lowercase letters, digits and ``_``), while a test name or node id may hold
+anything, ``/`` and ``::`` included, so the form is unambiguous both ways.
+
+:func:`spread` gives a test the plan does not place (a new test, or any test when the
+split is by count) its share from its identity alone: SHA-256, so every machine, every
+Python and every process draws the same share (``hash()`` is salted per process).
+"""
+
+from __future__ import annotations
+
+from ros_isolated_test.shard.digest import sha256
+
+SEPARATOR = "/"
+
+__all__ = ["SEPARATOR", "IdentityError", "identity", "split", "spread"]
+
+
+class IdentityError(ValueError):
+    """A package or test name that cannot form an identity (empty, or a ``/`` in a package)."""
+
+
+def identity(package: str, name: str) -> str:
+    """The identity of test ``name`` (ctest name or pytest node id) of ``package``."""
+    if not package or SEPARATOR in package:
+        raise IdentityError(
+            f"{package!r} is no package name: a package name is not empty and has no "
+            f"{SEPARATOR!r} (the identity is <package>{SEPARATOR}<test>)"
+        )
+    if not name:
+        raise IdentityError(f"package {package!r}: a test needs a name")
+    return f"{package}{SEPARATOR}{name}"
+
+
+def split(text: str) -> tuple[str, str]:
+    """``(package, name)`` of an identity: the inverse of :func:`identity`."""
+    package, separator, name = text.partition(SEPARATOR)
+    if not separator or not package or not name:
+        raise IdentityError(f"{text!r} is not <package>{SEPARATOR}<test>")
+    return package, name
+
+
+def spread(text: str, total: int) -> int:
+    """The share, from 1 to ``total``, that the identity ``text`` draws by its hash alone.
+
+    The first 8 bytes of the identity's SHA-256 (UTF-8; a name that was not UTF-8 keeps
+    its surrogates, encoded as they are), modulo ``total``: uniform enough for up to
+    1000 shares that no share is favoured by more than one part in 10^16.
+    """
+    digest = sha256(text.encode("utf-8", "surrogatepass"))
+    return int.from_bytes(digest[:8], "big") % total + 1
