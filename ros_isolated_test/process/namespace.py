@@ -5,9 +5,11 @@ port (rosbridge's 9090, a Zenoh router's 7447, a test's own server) still collid
 shared-memory transports meet in the common /dev/shm even across network namespaces
 (measured). So in namespace mode the test runs in new user, network, mount and IPC
 namespaces: loopback up with multicast (DDS, Zenoh and plain sockets work inside,
-reach nothing outside), a private tmpfs on /dev/shm, and a user namespace that maps the
-caller's own uid and gid (``getuid()``, file owners and ``$HOME`` unchanged; as root
-every ID the caller has is mapped to itself).
+reach no network outside), a private tmpfs on /dev/shm, and a user namespace that maps
+the caller's own uid and gid (``getuid()``, file owners and ``$HOME`` unchanged; every
+ID the caller may map, each to itself: root's all, its groups with CAP_SETGID). Not a
+sandbox: the other mounts and the processes (no PID namespace) stay the host's, so a
+file, a Unix socket bound to a path and a signal still reach it.
 
 Done with ``unshare(2)``, ``mount(2)`` and one ``ioctl(SIOCSIFFLAGS)`` through ctypes,
 which the reaper has loaded already: no helper program, no second interpreter. The
@@ -168,33 +170,22 @@ def _write(path: str, text: str) -> None:
 def write_maps(pid: int) -> None:
     """Map the caller's IDs into ``pid``'s new user namespace, from outside it.
 
-    A user maps its own uid and gid (groups denied: the kernel's rule for one unprivileged
-    line). Root maps every ID it has to itself and keeps setgroups, so files of other
-    users stay theirs and root stays root to them; where even root may not (a root that
-    is itself in a user namespace without those IDs), one line as for a user.
+    Each map holds every ID the caller has, each to itself, where the kernel allows it
+    (uids: CAP_SETUID and CAP_SETFCAP over the caller's namespace; gids: CAP_SETGID;
+    root holds all three), and setgroups is kept: other users' files stay theirs, root
+    stays root to them, supplementary groups read as themselves. Else (any other user;
+    a root in a user namespace without those IDs) the one line the kernel allows: the
+    caller's own ID, and for gids setgroups denied first, so supplementary groups read
+    as the overflow group there (still granting their access: the kernel checks them).
     """
     base = f"/proc/{pid}/"
-    uid, gid = os.geteuid(), os.getegid()
-    if uid == 0:
+    for kind, own in (("uid_map", os.geteuid()), ("gid_map", os.getegid())):
         try:
-            _write(base + "uid_map", _identity("uid_map"))
-            _write(base + "gid_map", _identity("gid_map"))
-            return
+            _write(base + kind, _identity(kind))
         except PermissionError:
-            pass
-    try:
-        _write(base + "uid_map", f"{uid} {uid} 1")
-    except OSError as error:
-        if error.errno != errno.EPERM or not _mapped(base + "uid_map"):
-            raise
-    _write(base + "setgroups", "deny")
-    _write(base + "gid_map", f"{gid} {gid} 1")
-
-
-def _mapped(path: str) -> bool:
-    """Whether an ID map was written already (root's identity map took uid, not gid)."""
-    with open(path, encoding="ascii") as handle:
-        return bool(handle.read().strip())
+            if kind == "gid_map":
+                _write(base + "setgroups", "deny")
+            _write(base + kind, f"{own} {own} 1")
 
 
 def _report(fd: int, error: BaseException) -> None:
@@ -383,16 +374,22 @@ def try_in_child() -> NamespaceError | None:
     return None
 
 
-def threads() -> int:
-    """How many threads this process runs (1 where /proc cannot say)."""
+def _status(field: str) -> str | None:
+    """A field of /proc/self/status (``Threads``, ``CapEff``); None where /proc cannot say."""
     try:
         with open("/proc/self/status", encoding="ascii", errors="replace") as handle:
             for line in handle:
-                if line.startswith("Threads:"):
-                    return int(line.split()[1])
-    except (OSError, ValueError, IndexError):
+                if line.startswith(f"{field}:"):
+                    return line.split()[1]
+    except (OSError, IndexError):
         pass
-    return 1
+    return None
+
+
+def threads() -> int:
+    """How many threads this process runs (1 where /proc cannot say)."""
+    found = _status("Threads")
+    return int(found) if found is not None and found.isdigit() else 1
 
 
 def enter_here() -> None:
@@ -448,9 +445,28 @@ def enter_here() -> None:
         _reap(helper)
 
 
+#: CAP_SETGID's bit in a capability set: what maps supplementary groups (:func:`write_maps`).
+_CAP_SETGID = 6
+
+
 def describe_user() -> str:
-    """Who the test is in its user namespace: the caller's own uid and gid."""
-    return f"uid {os.geteuid()}, gid {os.getegid()}"
+    """Who the test is in its user namespace: the caller's uid and gid, and its groups.
+
+    Supplementary groups read as the overflow group there unless this process may map
+    them (CAP_SETGID, as root holds): said, as ``getgroups()`` inside differs.
+    """
+    said = f"uid {os.geteuid()}, gid {os.getegid()}"
+    groups = sorted(set(os.getgroups()) - {os.getegid()})
+    held = _status("CapEff")
+    if not groups or (held is not None and int(held, 16) >> _CAP_SETGID & 1):
+        return said
+    try:
+        with open("/proc/sys/kernel/overflowgid", encoding="ascii") as handle:
+            overflow = handle.read().strip()
+    except OSError:
+        overflow = "65534"  # the kernel's default
+    listed = ", ".join(map(str, groups))
+    return f"{said} (supplementary groups {listed} read as {overflow} there, granting as before)"
 
 
 __all__ = [

@@ -6,7 +6,8 @@ A preset Gazebo partition (GZ_PARTITION, IGN_PARTITION) is refused for the same 
 the runner gives each test one of its own (see ``partition``).
 
 Namespace isolation (``--isolation namespace``) is decided here too: what contradicts it
-(a discovery range or static peers that need the outside network) and, for ``auto``,
+(a discovery range or static peers that need the outside network, files of the test in
+the host's /dev/shm, which its private one hides: ``private_shm``) and, for ``auto``,
 whether this host allows it, probed once before anything is reserved.
 """
 
@@ -31,6 +32,8 @@ from ros_isolated_test.runner.settings import (
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from ros_isolated_test.domain_coordinator.upstream import Setter
     from ros_isolated_test.process.namespace_diagnosis import Problem
 
@@ -184,6 +187,8 @@ def decide(
     env_origin: str = "--env",
     in_process: bool = False,
     xdist: bool = False,
+    command: Sequence[str] = (),
+    result_file: Path | None = None,
 ) -> Policy:
     """Build the test's environment, or raise :class:`RefusedError` for a preset domain.
 
@@ -191,7 +196,9 @@ def decide(
     own environment (``settings``) or an ``--env`` assignment (ament_add_test's ENV),
     which, like any assignment, has the last word; so does ROS_ISOLATED_TEST_ISOLATION.
     ``in_process``: the work runs in this process (the pytest plugin), which enters
-    the namespaces itself; ``xdist``: in pytest-xdist's workers, which cannot. Raises
+    the namespaces itself; ``xdist``: in pytest-xdist's workers, which cannot.
+    ``command`` and ``result_file`` (when the command names it) are what namespaces
+    must not hide from the test (``private_shm``), with its working directory. Raises
     :class:`~ros_isolated_test.runner.discovery.DiscoveryError` for a range the test's
     environment cannot carry (OFF on Humble), :class:`RefusedError` for namespace
     isolation that cannot be had.
@@ -234,7 +241,8 @@ def decide(
         if gz_partition:
             _refuse_preset_partition(assignments, environ, env_origin)
         confined = discovery.decide(env, settings.discovery_range)
-        namespaces, fallback = _namespaces(mode, asked, confined, in_process, xdist)
+        cut_off = _contradiction(mode, confined, env, command, result_file)
+        namespaces, fallback = _namespaces(mode, asked, cut_off, in_process, xdist)
         return Policy(
             isolate=True,
             env=env,
@@ -331,25 +339,51 @@ def _remote_peer(peers: str) -> str | None:
     return None
 
 
-def _contradiction(confined: discovery.Discovery) -> tuple[str, str] | None:
-    """What in the test's discovery needs the outside network, and the fix; None: nothing."""
+_NETWORK = "gives the test a network of its own, loopback only"
+
+
+def _contradiction(
+    mode: str,
+    confined: discovery.Discovery,
+    env: Mapping[str, str],
+    command: Sequence[str],
+    result_file: Path | None,
+) -> tuple[str, str, str] | None:
+    """What namespaces would cut the test off from: (what they give, the cause, the fix).
+
+    Its discovery needing the outside network, or its files in the host's /dev/shm
+    (``private_shm``); None: nothing (and always in domain mode).
+    """
+    if mode == "domain":
+        return None
     if confined.range == "SUBNET":
         return (
+            _NETWORK,
             f"its discovery range is SUBNET ({confined.source}), which needs the outside network",
             "use LOCALHOST (--discovery-range LOCALHOST)",
         )
     peer = _remote_peer(confined.peers)
     if peer is not None:
         return (
+            _NETWORK,
             f"{discovery.PEERS_VAR}={confined.peers} names another host ({peer}), which it "
             "cannot reach",
             f"name only localhost there, or unset {discovery.PEERS_VAR}",
         )
+    from ros_isolated_test.runner import private_shm
+
+    hidden = private_shm.hidden(command, env, result_file)
+    if hidden:
+        return private_shm.GIVES, private_shm.cause(hidden), private_shm.FIX
     return None
 
 
 def _namespaces(
-    mode: str, asked: str, confined: discovery.Discovery, in_process: bool, xdist: bool
+    mode: str,
+    asked: str,
+    contradiction: tuple[str, str, str] | None,
+    in_process: bool,
+    xdist: bool,
 ) -> tuple[bool, str | None]:
     """(whether the test gets namespaces, why ``auto`` falls back) for ``mode``.
 
@@ -362,13 +396,11 @@ def _namespaces(
     """
     if mode == "domain":
         return False, None
-    network = "gives the test a network of its own, loopback only"
-    contradiction = _contradiction(confined)
     if contradiction is not None:
-        cause, fix = contradiction
+        gives, cause, fix = contradiction
         if mode == "namespace":
             raise RefusedError(
-                f"refusing to run: {asked} {network}, but {cause}; {fix}, or use isolation "
+                f"refusing to run: {asked} {gives}, but {cause}; {fix}, or use isolation "
                 f"domain ({ISOLATION_ENV}, run --isolation)",
                 ISOLATION_ENV,
             )

@@ -91,7 +91,13 @@ def _decided(
         result.write([result.case(Outcome.SKIPPED, "Test skipped by developer (SKIP_TEST)")])
         return exit_codes.PASSED
     try:
-        policy = environment.decide(request.env, request.settings, env_origin=request.env_origin)
+        policy = environment.decide(
+            request.env,
+            request.settings,
+            env_origin=request.env_origin,
+            command=request.command,
+            result_file=request.result_file,
+        )
     except environment.RefusedError as refusal:
         return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
     except DiscoveryError as error:

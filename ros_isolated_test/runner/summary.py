@@ -132,7 +132,9 @@ def isolation_summary(
         lines = [
             "isolation namespace: network (loopback only), mount (a private /dev/shm) and "
             f"IPC namespaces of its own, in a user namespace as {namespace.describe_user()}: "
-            "nothing it binds or sends reaches another test"
+            "its ports, multicast, abstract Unix sockets, /dev/shm and IPC are its own; files "
+            "(a Unix socket bound to a path too) and processes (/proc, signals) are shared "
+            "with the host"
         ]
         mode = "namespace" if policy.mode == "namespace" else "namespace (auto)"
         properties = {"isolation": mode}

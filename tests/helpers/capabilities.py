@@ -145,6 +145,19 @@ def _other_users() -> str | None:
     return None
 
 
+def _setpriv() -> str | None:
+    """setpriv(1) starts a runner as nobody with supplementary groups and an ambient capability."""
+    if (missing := _other_users()) is not None:
+        return missing
+    if shutil.which("setpriv") is None:
+        return "needs setpriv(1) from util-linux (scripts/setup.sh installs it)"
+    ambient = ["--inh-caps=+setgid", "--ambient-caps=+setgid"]
+    failed = _run_ok(["setpriv", "--reuid=65534", "--regid=65534", "--groups=20", *ambient, "true"])
+    if failed is not None:
+        return f"setpriv cannot start a process as nobody with an ambient capability: {failed}"
+    return None
+
+
 def _setuid_helper() -> str | None:
     """A setuid-root program built in the temp dir (a process other users may not signal)."""
     if (missing := _other_users()) is not None:
@@ -404,6 +417,8 @@ UNSHARE = Capability("unshare", _unshare)
 MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
 NETWORK_NAMESPACES = Capability("network-namespaces", _network_namespaces)
 OTHER_USERS = Capability("other-users", _other_users)
+#: Runners as nobody with supplementary groups (and an ambient CAP_SETGID), via setpriv(1).
+SETPRIV = Capability("setpriv", _setpriv)
 SETUID_HELPER = Capability("setuid-helper", _setuid_helper)
 IPV6 = Capability("ipv6", _ipv6)
 #: The outside tier: tests that read ``../shared`` (present in CI, absent in a fresh clone).

@@ -10,7 +10,9 @@ OSError. ``try_in_child`` enters them for real in a child that exits; ``enter_he
 puts the calling process itself in them (the pytest plugin's way), refused while it
 runs threads, and gives back the capabilities a user who is not root got there. Through
 the runner too, with the control: in domain mode the test shares the host's network
-and /dev/shm. Why a host refuses namespaces is ``test_namespace_diagnosis.py``.
+and /dev/shm. ``describe_user`` names the supplementary groups a user cannot map. Why a
+host refuses namespaces is ``test_namespace_diagnosis.py``; what crosses the boundary,
+and the groups end to end, tests/e2e/test_namespace_boundary.py.
 """
 
 from __future__ import annotations
@@ -222,6 +224,29 @@ def test_a_user_who_is_not_root_gives_back_the_capabilities_the_namespace_gave()
     assert as_nobody["user"] == f"uid {nobody['user']}, gid {nobody['group']}"
     assert as_nobody["capabilities"] == 0, as_nobody
     assert os.geteuid() != 0 or in_child(ENTER)["capabilities"] != 0
+
+
+#: Who the test is said to be in its user namespace.
+DESCRIBE = """
+import json
+from ros_isolated_test.process import namespace
+print(json.dumps(namespace.describe_user()))
+"""
+
+
+@capabilities.OTHER_USERS.mark
+def test_the_user_is_described_with_the_groups_it_cannot_map() -> None:
+    """A user without CAP_SETGID maps its gid alone: its groups read as 65534 inside.
+
+    Controls: no supplementary groups, nothing to say; root holds CAP_SETGID and maps them.
+    """
+    nobody = user_keywords(65534)
+    with_groups = in_child(DESCRIBE, **(nobody | {"extra_groups": [20, 44]}))
+    assert with_groups == (
+        "uid 65534, gid 65534 (supplementary groups 20, 44 read as 65534 there, granting as before)"
+    )
+    assert in_child(DESCRIBE, **nobody) == "uid 65534, gid 65534"
+    assert in_child(DESCRIBE, extra_groups=[20, 44]) == "uid 0, gid 0"
 
 
 # --- through the runner -----------------------------------------------------------------

@@ -8,7 +8,8 @@ it counts wherever the test's environment gets it (the runner's own environment,
 supported distro (the ``tools`` fixture); it matters most on Kilted, whose upstream runner
 silently replaces a preset ID instead. In process: the policy itself (the unset control
 of every refusal, the mark of an ID held for us, ``--append-env``, what never reaches the
-test, namespaces that contradict the test's discovery). The Gazebo partition's half of
+test, namespaces that contradict the test's discovery or would hide its
+files in the host's /dev/shm). The Gazebo partition's half of
 the policy is in test_environment_partition.py.
 """
 
@@ -380,4 +381,30 @@ def test_namespaces_that_would_cut_the_test_off_are_refused_or_fall_back(
     # The control: loopback peers and the default range leave namespace mode as asked.
     loopback = {"ROS_STATIC_PEERS": "localhost;127.0.0.1;[::1]"}
     policy = _decide(loopback, config=settings.read(loopback, isolation="namespace"))
+    assert policy.namespaces and policy.fallback is None
+
+
+def test_a_test_starting_in_the_hosts_dev_shm_is_refused_namespaces_or_falls_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Its private /dev/shm would hide it: ``namespace`` refuses, ``auto`` runs on the ID
+    alone, ``domain`` (the control) runs it; from a folder on disk, namespaces as asked."""
+    shm = Path("/dev/shm") / f"rit-env-{tmp_path.name}"
+    shm.mkdir()
+    try:
+        monkeypatch.chdir(shm)
+        with pytest.raises(RefusedError) as refused:
+            _decide({}, config=settings.read({}, isolation="namespace"))
+        assert refused.value.variable == settings.ISOLATION_ENV
+        message = str(refused.value)
+        assert f"its working directory {shm} is in the host's /dev/shm" in message, message
+        assert "/dev/shm of its own" in message and "\n" not in message
+        auto = _decide({}, config=settings.read({}, isolation="auto"))
+        assert not auto.namespaces and auto.fallback is not None
+        assert f"as namespaces would cut it off: its working directory {shm}" in auto.fallback
+        assert not _decide({}).namespaces and _decide({}).fallback is None
+    finally:
+        monkeypatch.chdir(tmp_path)
+        shm.rmdir()
+    policy = _decide({}, config=settings.read({}, isolation="namespace"))
     assert policy.namespaces and policy.fallback is None

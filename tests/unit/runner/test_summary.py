@@ -116,6 +116,13 @@ def test_how_the_test_is_kept_apart_is_recorded_unless_by_default() -> None:
     assert reserved[1] == {"isolation": "namespace", "ros_domain_id_reserved": "yes"}
     (line,) = reserved[0]
     assert line.startswith("isolation namespace: network (loopback only), mount (a private")
+    # What is its own and what is not, as measured (tests/e2e/test_namespace_boundary.py).
+    own, not_own = line.split("are its own; ")
+    assert own.endswith("its ports, multicast, abstract Unix sockets, /dev/shm and IPC ")
+    assert not_own == (
+        "files (a Unix socket bound to a path too) and processes (/proc, signals) are shared "
+        "with the host"
+    )
     shared = isolation_summary(_policy(namespaces=True, mode="auto"), 5, False)
     assert shared[1]["isolation"] == "namespace (auto)"
     assert shared[1]["ros_domain_id_reserved"].startswith("no: no ID of the pool is free")
