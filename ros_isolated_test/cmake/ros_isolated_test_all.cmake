@@ -3,7 +3,8 @@
 # (every attempt kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS;
 # with RESOURCES (e.g. cpu=2,mem=4G, or a CMake list "cpu=2;mem=4G"), each of them holds
 # those machine resources with its domain ID (waiting until they are free), unless its own
-# ENV sets ROS_ISOLATED_TEST_RESOURCES. A test with a RUNNER of its own gets neither.
+# ENV sets ROS_ISOLATED_TEST_RESOURCES. A test that keeps a RUNNER of its own gets neither;
+# one taken over from upstream's isolated runner (below) gets both.
 #
 # ament_add_gtest, ament_add_gmock, ament_add_pytest_test, add_launch_test and third-party
 # macros all register their tests through ament_add_test, whose RUNNER defaults to ament's
