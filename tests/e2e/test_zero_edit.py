@@ -28,7 +28,9 @@ import pytest
 from helpers import capabilities
 from helpers.cmake_package import build_wheel, install_wheel, runners_of
 from helpers.commands import REPO, run_cli
+from helpers.distros import JAZZY, KILTED, Tools
 from helpers.domains import free_ids
+from helpers.results import load_result
 from helpers.workspace import crosstalk_workspace
 
 if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
@@ -55,6 +57,10 @@ RECIPE = "colcon build --cmake-args -DCMAKE_PROJECT_INCLUDE=$(ros-isolated-test 
 IN_PARALLEL = "colcon test --parallel-workers 3 --ctest-args -j3"
 #: The status line of an isolated package (CMake prints it after "-- ").
 ISOLATED = re.compile(r"^-- ros_isolated_test: tests of (\S+) are isolated.* run by (\S+) ", re.M)
+#: The whole of that line, from its first word.
+ISOLATED_LINE = re.compile(r"^-- (ros_isolated_test: tests of \S+ are isolated.*)$", re.M)
+#: The line naming the tests that are not isolated, from its first word.
+NOT_ISOLATED_LINE = re.compile(r"^-- (ros_isolated_test: NOT isolated, .*)$", re.M)
 NOT_ISOLATED = "ros_isolated_test: tests of {} are NOT isolated (ROS_ISOLATED_TEST_ALL is OFF)"
 
 
@@ -307,11 +313,173 @@ def test_a_test_with_a_runner_of_its_own_keeps_it(
     assert runners["own"].endswith("/ament_cmake_test/cmake/run_test.py"), runners
 
 
+#: Tests registered with upstream's isolated runner (ament_cmake_ros's run_test_isolated.py),
+#: each naming it its own way, and tests around them that keep their RUNNER.
+_UPSTREAM_BODY = """find_package(ament_cmake REQUIRED)
+find_package(ament_cmake_ros REQUIRED)
+set(upstream "${ament_cmake_ros_DIR}/run_test_isolated.py")
+ament_add_test(by_path COMMAND true RUNNER "${upstream}" GENERATE_RESULT_FOR_RETURN_CODE_ZERO)
+ament_add_test(spelled COMMAND true RUNNER "${ament_cmake_ros_DIR}/../cmake//run_test_isolated.py")
+ament_add_test(linked COMMAND true RUNNER "{linked}")
+ament_add_ros_isolated_pytest_test(by_macro test_nothing.py)
+ament_add_test(pinned COMMAND true RUNNER "${upstream}" ENV ROS_DOMAIN_ID=5)
+ament_add_test(copied COMMAND true RUNNER "${CMAKE_CURRENT_SOURCE_DIR}/cmake/run_test_isolated.py")
+ament_add_test(own COMMAND true RUNNER "${ament_cmake_test_DIR}/run_test.py")
+ament_add_test(plain COMMAND true)
+add_subdirectory(raw)
+"""
+#: A plain add_test and a file of tests ctest reads when it runs (gtest_discover_tests).
+_RAW_BODY = """add_test(NAME raw COMMAND true)
+file(WRITE "${CMAKE_CURRENT_BINARY_DIR}/discovered.cmake" "")
+set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES
+  "${CMAKE_CURRENT_BINARY_DIR}/discovered.cmake")
+"""
+
+
+@capabilities.CTEST.mark
+def test_upstreams_isolated_runner_is_taken_over_and_every_test_left_out_is_named(
+    tmp_path: Path, env: dict[str, str], include_file: str, runner_script: str
+) -> None:
+    """Upstream's run_test_isolated.py, however its path is spelled (a link to it, its own
+    macro), runs through ours; with ROS_DOMAIN_ID in its ENV it is kept (ours would
+    refuse it), and so is any other RUNNER, even a copy of upstream's file in the package.
+    The line counts the tests taken over, the next names each test not isolated and why.
+    The control: a package whose every test goes through ament_add_test says no more."""
+    upstream = JAZZY.upstream_runner
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "run_test_isolated.py").symlink_to(upstream)
+    body = _UPSTREAM_BODY.replace("{linked}", str(tmp_path / "links" / "run_test_isolated.py"))
+    source = _package(tmp_path / "src", body)
+    _package(source / "raw", _RAW_BODY, build_type=None, name="raw")
+    (source / "test_nothing.py").write_text("")
+    (source / "cmake").mkdir()
+    shutil.copy(upstream, source / "cmake" / "run_test_isolated.py")
+    done = _configured(source, tmp_path / "build", env, f"-DCMAKE_PROJECT_INCLUDE={include_file}")
+
+    runners = runners_of(tmp_path / "build" / "CTestTestfile.cmake")
+    taken = ("by_path", "spelled", "linked", "by_macro")
+    assert {name: runners[name] for name in (*taken, "plain")} == dict.fromkeys(
+        (*taken, "plain"), runner_script
+    ), runners
+    assert runners["pinned"] == str(upstream), runners
+    assert runners["copied"] == str(source / "cmake" / "run_test_isolated.py"), runners
+    assert runners["own"].endswith("/ament_cmake_test/cmake/run_test.py"), runners
+    (line,) = ISOLATED_LINE.findall(done.stdout)
+    assert line.endswith(": 5 tests, 4 of them taken over from upstream's run_test_isolated.py")
+    (left_out,) = NOT_ISOLATED_LINE.findall(done.stdout)
+    assert left_out.startswith("ros_isolated_test: NOT isolated, 4 tests of tiny: "), left_out
+    for named in (
+        "copied (its own RUNNER run_test_isolated.py)",
+        "own (its own RUNNER run_test.py)",
+        "pinned (upstream's run_test_isolated.py, kept: its ENV sets ROS_DOMAIN_ID)",
+        "raw (a plain add_test(), not ament_add_test(): no RUNNER to replace)",
+    ):
+        assert named in left_out, left_out
+    assert re.search(
+        r"that ctest discovers when it runs \(TEST_INCLUDE_FILES, e\.g\. gtest_discover_tests, "
+        rf"in {re.escape(str(source / 'raw'))}\) are NOT isolated",
+        done.stdout,
+    ), done.stdout
+
+    # Taken over, it runs through ours: our result file, on an ID of ours.
+    ctest = subprocess.run(
+        ["ctest", "-R", "^by_path$", "--output-on-failure"], cwd=tmp_path / "build",
+        env=_colcon_env(env), capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert ctest.returncode == 0, ctest.stdout + ctest.stderr
+    result = load_result(tmp_path / "build" / "test_results" / "tiny" / "by_path.xml")
+    assert result.properties.get("ros_domain_id"), result.properties
+
+    control = _package(tmp_path / "control", "find_package(ament_cmake REQUIRED)\n"
+                       "ament_add_test(plain COMMAND true)\n")  # fmt: skip
+    said = _configured(control, tmp_path / "control-build", env,
+                       f"-DCMAKE_PROJECT_INCLUDE={include_file}").stdout  # fmt: skip
+    assert [line.rsplit(": ", 1)[1] for line in ISOLATED_LINE.findall(said)] == ["1 test"], said
+    assert not NOT_ISOLATED_LINE.findall(said) and "NOT" not in said, said
+
+
+@capabilities.KILTED.mark
+@capabilities.CTEST.mark
+def test_kilteds_isolated_runner_is_taken_over_too(tmp_path: Path, env: dict[str, str]) -> None:
+    """Kilted's run_test_isolated.py (rmw_test_fixture), as its ament_add_ros_isolated_test
+    names it: configured with Kilted's CMake packages, the test runs through ours."""
+    kilted = Tools.on(KILTED)
+    kilted_env = kilted.env(env)
+    include = kilted.run_cli(["cmake-include"], kilted_env).stdout.strip()
+    source = _package(
+        tmp_path / "src",
+        "find_package(ament_cmake REQUIRED)\nfind_package(ament_cmake_ros REQUIRED)\n"
+        "ament_add_ros_isolated_test(k COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n",
+    )
+    build = tmp_path / "build"
+    done = subprocess.run(
+        ["cmake", "-S", str(source), "-B", str(build), f"-DPython3_EXECUTABLE={kilted.python}",
+         f"-DCMAKE_PROJECT_INCLUDE={include}"],
+        env=kilted_env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert runners_of(build / "CTestTestfile.cmake") == {"k": kilted.runner_script()}
+    (line,) = ISOLATED_LINE.findall(done.stdout)
+    assert line.endswith(": 1 test, 1 of them taken over from upstream's run_test_isolated.py")
+    ctest = subprocess.run(["ctest", "--output-on-failure"], cwd=build, env=kilted_env,
+                           capture_output=True, text=True, check=False)  # fmt: skip
+    assert ctest.returncode == 0, ctest.stdout + ctest.stderr
+    result = load_result(build / "test_results" / "tiny" / "k.xml")
+    assert result.properties.get("ros_domain_id"), result.properties
+
+
+_EXPORT = "<export><build_type{condition}>{build_type}</build_type></export>"
+
+
+@pytest.mark.parametrize(
+    ("extra", "export", "ros_version", "isolated"),
+    [
+        ("", _EXPORT.format(condition="", build_type="ament_cmake"), None, True),
+        (f"<!-- {_EXPORT.format(condition='', build_type='ament_cmake')} -->",
+         _EXPORT.format(condition="", build_type="cmake"), None, False),
+        (f"<description><![CDATA[{_EXPORT.format(condition='', build_type='ament_cmake')}]]>"
+         "</description>", _EXPORT.format(condition="", build_type="cmake"), None, False),
+        ("", _EXPORT.format(condition=' condition="$ROS_VERSION == 2"', build_type="ament_cmake")
+         .replace("<export>", '<export><build_type condition="$ROS_VERSION == 1">catkin'
+                  "</build_type>"), "2", True),
+        ("", _EXPORT.format(condition=' condition="$ROS_VERSION == 1"', build_type="ament_cmake"),
+         "2", False),
+    ],
+    ids=["control-export", "in-a-comment", "in-cdata", "condition-holds", "condition-fails"],
+)  # fmt: skip
+def test_the_manifest_is_read_as_markup_not_searched_as_text(
+    tmp_path: Path,
+    env: dict[str, str],
+    include_file: str,
+    extra: str,
+    export: str,
+    ros_version: str | None,
+    isolated: bool,
+) -> None:
+    """Only an exported <build_type>ament_cmake</build_type> whose condition holds makes an
+    ament_cmake package: one in a comment or a CDATA section is text (the project is left
+    untouched, nothing found), and so is one whose condition does not hold here."""
+    source = _package(tmp_path / "src", "enable_testing()\nadd_test(NAME t COMMAND true)\n",
+                      build_type=None)  # fmt: skip
+    (source / "package.xml").write_text(
+        _MANIFEST.replace("<export><build_type>{build_type}</build_type></export>", extra + export)
+        .format(name="tiny")
+    )  # fmt: skip
+    configure_env = {**env, "ROS_VERSION": ros_version} if ros_version else env
+    done = _configured(source, tmp_path / "build", configure_env,
+                       f"-DCMAKE_PROJECT_INCLUDE={include_file}")  # fmt: skip
+    found = any(e.startswith("ament_cmake_test_DIR:") for e in _cache(tmp_path / "build"))
+    assert (bool(ISOLATED_LINE.findall(done.stdout)), found) == (isolated, isolated), done.stdout
+    if not isolated:
+        assert "ros_isolated_test" not in done.stdout + done.stderr, done.stdout
+
+
 def test_a_package_calling_ros_isolated_test_all_itself_is_unchanged(
     tmp_path: Path, env: dict[str, str], include_file: str, runner_script: str
 ) -> None:
     """Configured with and without the include, the same tests with the same arguments:
-    no second wrapper, the package's RERUNS and its macros' RESOURCES kept."""
+    no second wrapper, the package's RERUNS and its macros' RESOURCES kept; one line
+    either way, naming who isolated them."""
     source = _package(
         tmp_path / "src",
         "find_package(ament_cmake REQUIRED)\nfind_package(ros_isolated_test 0.1 REQUIRED)\n"
@@ -325,8 +493,9 @@ def test_a_package_calling_ros_isolated_test_all_itself_is_unchanged(
         source, tmp_path / "with", env, f"-DCMAKE_PROJECT_INCLUDE={include_file}"
     )
     alone = _configured(source, tmp_path / "without", env)
-    assert ISOLATED.findall(included.stdout) == [("tiny", runner_script)], included.stdout
-    assert not ISOLATED.findall(alone.stdout), alone.stdout
+    for done, how in ((included, "(CMAKE_PROJECT_INCLUDE; "), (alone, "(ros_isolated_test_all())")):
+        assert ISOLATED.findall(done.stdout) == [("tiny", runner_script)], done.stdout
+        assert f"{how}" in done.stdout and ": 2 tests\n" in done.stdout, done.stdout
     assert _ctest_file(tmp_path / "with") == _ctest_file(tmp_path / "without")
     ctest_file = _ctest_file(tmp_path / "with")
     assert ctest_file.count(f'"-u" "{runner_script}"') == 2, ctest_file
@@ -540,6 +709,47 @@ def test_a_colcon_defaults_file_isolates_every_build(
     assert runners["t"].endswith("/ament_cmake_test/cmake/run_test.py"), runners
 
 
+@capabilities.CTEST.mark
+def test_the_include_is_added_to_a_workspaces_defaults_file_keeping_every_setting(
+    tmp_path: Path, pool_env: dict[str, str], runner_script: str
+) -> None:
+    """A workspace's own .colcon/defaults.yaml, read with COLCON_HOME=.colcon: its merged
+    install layout and CMake argument apply before (the control: colcon reads the file;
+    nothing isolated) and after ``cmake-include --colcon-defaults FILE`` added the include,
+    which now isolates every test too."""
+    ws = _tiny_workspace(tmp_path, pool_env)
+    ws.env["COLCON_HOME"] = str(tmp_path / ".colcon")
+    defaults = tmp_path / ".colcon" / "defaults.yaml"
+    defaults.parent.mkdir()
+    original = (
+        "# the workspace's own settings\n"
+        "build:\n  merge-install: true\n  cmake-args: [-DKEEP_ME=yes]\n"
+        "test:\n  merge-install: true\n"
+    )
+    defaults.write_text(original)
+
+    def merged_and_kept() -> None:
+        assert (tmp_path / "install" / "share" / "route_a").is_dir()
+        assert not (tmp_path / "install" / "route_a").exists(), "not the merged layout"
+        cache = _cache(tmp_path / "build" / "route_a")
+        assert "KEEP_ME:UNINITIALIZED=yes" in cache, cache
+
+    ws.shell("colcon build")
+    merged_and_kept()
+    assert _runner_of(ws, "route_a").endswith("/ament_cmake_test/cmake/run_test.py")
+
+    said = ws.shell("ros-isolated-test cmake-include --colcon-defaults .colcon/defaults.yaml")
+    assert said.endswith("added to build's cmake-args; every other setting kept\n"), said
+    assert defaults.read_text().startswith(original.partition("cmake-args")[0])
+    ws.shell("colcon build")
+    merged_and_kept()
+    assert _runner_of(ws, "route_a") == _runner_of(ws, "route_b") == runner_script
+    ws.shell("colcon test --parallel-workers 2")
+    for name in ("route_a", "route_b"):
+        result = load_result(ws.root / "build" / name / "test_results" / name / "t.xml")
+        assert result.properties.get("ros_domain_id"), result.properties
+
+
 def test_a_colcon_meta_entry_opts_one_package_out(
     tmp_path: Path, env: dict[str, str], runner_script: str
 ) -> None:
@@ -609,16 +819,42 @@ def test_a_package_with_an_old_minimum_version_is_isolated_too(
         assert runners_of(build / "CTestTestfile.cmake") == {"t": runner_script}
 
 
-def test_a_build_without_tests_needs_no_runner(
+def test_a_build_without_tests_isolates_a_test_registered_anyway(
     tmp_path: Path, env: dict[str, str], include_file: str, runner_script: str
 ) -> None:
-    """BUILD_TESTING=OFF: nothing to isolate, so nothing found or said, and no runner
-    needed; the control, with tests, says its line."""
-    body = "find_package(ament_cmake REQUIRED)\n"
-    source = _package(tmp_path / "src", body)
+    """BUILD_TESTING=OFF: a package whose tests are inside if(BUILD_TESTING) says nothing;
+    an ament_add_test outside it (ctest runs it all the same) is isolated, and the line
+    says so. With no runner to be found, a build not meant to test still configures and
+    names that test as NOT isolated (with BUILD_TESTING ON it is a configure error:
+    test_no_runner_is_a_configure_error_naming_the_fix_and_the_opt_out)."""
     include = f"-DCMAKE_PROJECT_INCLUDE={include_file}"
-    off = _configured(source, tmp_path / "off", env, include, "-DBUILD_TESTING=OFF")
-    assert "ros_isolated_test:" not in off.stdout, off.stdout
-    assert not any(e.startswith("ros_isolated_test_DIR:") for e in _cache(tmp_path / "off"))
-    on = _configured(source, tmp_path / "on", env, include)
-    assert ISOLATED.findall(on.stdout) == [("tiny", runner_script)], on.stdout
+    no_runner = f"-DROS_ISOLATED_TEST_EXECUTABLE={tmp_path / 'no-such-ros-isolated-test'}"
+    guarded = _package(
+        tmp_path / "guarded",
+        "find_package(ament_cmake REQUIRED)\n"
+        "if(BUILD_TESTING)\n  ament_add_test(t COMMAND true)\nendif()\n",
+    )
+    stray = _package(
+        tmp_path / "stray", "find_package(ament_cmake REQUIRED)\nament_add_test(t COMMAND true)\n"
+    )
+    for args in ((), (no_runner,)):
+        quiet = _configured(guarded, tmp_path / f"guarded{len(args)}", env, include,
+                            "-DBUILD_TESTING=OFF", *args)  # fmt: skip
+        assert "ros_isolated_test:" not in quiet.stdout, quiet.stdout
+        assert runners_of(tmp_path / f"guarded{len(args)}" / "CTestTestfile.cmake") == {}
+
+    off = _configured(stray, tmp_path / "off", env, include, "-DBUILD_TESTING=OFF")
+    assert runners_of(tmp_path / "off" / "CTestTestfile.cmake") == {"t": runner_script}
+    (line,) = ISOLATED_LINE.findall(off.stdout)
+    assert line.endswith(": 1 test (registered although BUILD_TESTING is OFF)"), off.stdout
+
+    unfound = _configured(stray, tmp_path / "unfound", env, include, "-DBUILD_TESTING=OFF",
+                          no_runner)  # fmt: skip
+    runners = runners_of(tmp_path / "unfound" / "CTestTestfile.cmake")
+    assert runners["t"].endswith("/ament_cmake_test/cmake/run_test.py"), runners
+    said = " ".join(unfound.stdout.split())
+    assert (
+        "ros_isolated_test: NOT isolated, tests of tiny registered although BUILD_TESTING is "
+        f"OFF: t; no runner was found: '{tmp_path / 'no-such-ros-isolated-test'} runner-path' "
+        "did not print the path of the RUNNER script"
+    ) in said, said

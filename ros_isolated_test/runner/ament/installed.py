@@ -40,6 +40,7 @@ def colcon_defaults(include: Path) -> str:
     return (
         "# colcon defaults (COLCON_DEFAULTS_FILE): ros-isolated-test isolates the tests of\n"
         "# every ament_cmake package colcon builds. A --cmake-args given on the command line\n"
-        "# replaces this list: name the include there too.\n"
+        "# replaces this list: name the include there too. To add it to a defaults file\n"
+        "# you already have: ros-isolated-test cmake-include --colcon-defaults FILE\n"
         f"build:\n  cmake-args:\n    - {argument}"
     )
