@@ -1,4 +1,4 @@
-"""``xunit.html_report``: ``report --html`` writes one page for a tree, read here as HTML.
+"""``report.html_report``: ``report --html`` writes one page for a tree, read here as HTML.
 
 The writer reads each result file once, into the page, as ``report`` reads it, and
 returns each file's report for the text report and the exit code, which stay as they
@@ -22,7 +22,9 @@ from helpers.report_page import parsed
 from helpers.xunit import SAMPLES
 
 from ros_isolated_test.atomic_file import NotReplaceableError
-from ros_isolated_test.xunit import html_report, report, serialise
+from ros_isolated_test.report import html_report
+from ros_isolated_test.report.tree import reports as tree_reports
+from ros_isolated_test.xunit import serialise
 from ros_isolated_test.xunit.model import Case, Suite
 
 
@@ -36,7 +38,7 @@ def test_the_page_replaces_its_destination_whole_and_gives_each_files_report(
     destination.parent.mkdir()
     destination.write_text("an old page")
     reports = html_report.write([tree], destination)
-    expected = report.reports([tree])
+    expected = tree_reports([tree])
     assert [(item.path, item.tests, item.failures) for item in reports] == [
         (item.path, item.tests, item.failures) for item in expected
     ]

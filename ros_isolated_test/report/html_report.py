@@ -30,12 +30,14 @@ from pathlib import Path
 from typing import IO
 
 from ros_isolated_test.atomic_file import NotReplaceableError, discards, special_kind
+from ros_isolated_test.report import html_timeline
+from ros_isolated_test.report.counts import FileReport, counted
+from ros_isolated_test.report.html_page import FACTS, Page, assemble
+from ros_isolated_test.report.html_parts import text, write_case, write_suite
+from ros_isolated_test.report.tree import result_files, unreadable_folder
 from ros_isolated_test.text import shown
-from ros_isolated_test.xunit import html_timeline, normalise, raw, reader
+from ros_isolated_test.xunit import normalise, raw, reader
 from ros_isolated_test.xunit.canonical import test_name_of
-from ros_isolated_test.xunit.html_page import FACTS, Page, assemble
-from ros_isolated_test.xunit.html_parts import text, write_case, write_suite
-from ros_isolated_test.xunit.report import FileReport, counted, result_files, unreadable_folder
 
 
 def write(paths: Iterable[Path], destination: Path) -> list[FileReport]:

@@ -1,4 +1,4 @@
-"""``xunit.html_timeline``: one bar per attempt, where and when it ran, on a time axis.
+"""``report.html_timeline``: one bar per attempt, where and when it ran, on a time axis.
 
 Bars come from what the runner records in each result file (an earlier attempt's from
 its own ``attempt_<k>.`` properties) or from another producer's own timestamp when it
@@ -21,10 +21,10 @@ from helpers.report_page import parsed, report_page, timeline_bars, timeline_row
 from helpers.results import load_result
 from helpers.xunit import SAMPLES
 
-from ros_isolated_test.xunit.html_timeline import Bar, bars_of, runs, timeline_html
+from ros_isolated_test.report.counts import counted
+from ros_isolated_test.report.html_timeline import Bar, bars_of, runs, timeline_html
 from ros_isolated_test.xunit.model import Case, Outcome
 from ros_isolated_test.xunit.raw import RawSuite, ReadResult
-from ros_isolated_test.xunit.report import counted
 from ros_isolated_test.xunit.timeline import timeline_properties
 
 START = 1_790_000_000.0

@@ -1,4 +1,4 @@
-"""``xunit.html_page``: the page put together, the totals first although they are known last.
+"""``report.html_page``: the page put together, the totals first although they are known last.
 
 While files are read the page keeps only counts, a few distinct facts per kind, one
 bar per attempt and three spools; then it streams the page in reading order. It is
@@ -15,10 +15,10 @@ from helpers import chromium, result_tree
 from helpers.report_page import parsed, report_page
 from lxml import html
 
-from ros_isolated_test.xunit import html_assets
-from ros_isolated_test.xunit.html_page import FACT_VALUES, Page, assemble
+from ros_isolated_test.report import html_assets
+from ros_isolated_test.report.counts import counted
+from ros_isolated_test.report.html_page import FACT_VALUES, Page, assemble
 from ros_isolated_test.xunit.model import Case, Outcome
-from ros_isolated_test.xunit.report import counted
 
 
 def _assembled(page: Page) -> html.HtmlElement:

@@ -1,4 +1,4 @@
-"""``xunit.html_parts``: the page's small pieces, text as the page shows it and each case's block.
+"""``report.html_parts``: the page's small pieces, text as the page shows it and each case's block.
 
 Every part clips and escapes its text the same way, so a name or message is always
 text and never markup; the blocks of failed, flaky and other cases go to spools
@@ -15,10 +15,10 @@ from helpers.chromium import with_class as cls
 from helpers.report_page import parsed, report_page
 from lxml import html
 
+from ros_isolated_test.report.counts import counted
+from ros_isolated_test.report.html_parts import Spool, attr, text, write_case, write_suite
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
-from ros_isolated_test.xunit.html_parts import Spool, attr, text, write_case, write_suite
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome
-from ros_isolated_test.xunit.report import counted
 
 
 def _written(write: Callable[[Spool], None]) -> html.HtmlElement:

@@ -14,10 +14,10 @@ import math
 from collections.abc import Callable
 from html import escape
 
+from ros_isolated_test.report.counts import FileReport
+from ros_isolated_test.report.html_parts import attr, local, text
 from ros_isolated_test.xunit import raw
 from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY
-from ros_isolated_test.xunit.html_parts import attr, local, text
-from ros_isolated_test.xunit.report import FileReport
 from ros_isolated_test.xunit.timeline import ENDED_AT, STARTED_AT, WAIT_DOMAIN, WAIT_RESOURCES
 
 #: Timestamps before this are a producer's placeholder (gtest writes 1970-01-01).

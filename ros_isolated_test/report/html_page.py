@@ -15,10 +15,10 @@ from html import escape
 from typing import IO
 
 from ros_isolated_test import __version__
-from ros_isolated_test.xunit import html_assets
-from ros_isolated_test.xunit.html_parts import Spool, attr, local, text
-from ros_isolated_test.xunit.html_timeline import Bar, timeline_html
-from ros_isolated_test.xunit.report import FileReport
+from ros_isolated_test.report import html_assets
+from ros_isolated_test.report.counts import FileReport
+from ros_isolated_test.report.html_parts import Spool, attr, local, text
+from ros_isolated_test.report.html_timeline import Bar, timeline_html
 from ros_isolated_test.xunit.timeline import DOMAIN_POOL
 
 #: Distinct values kept per fact (hosts, pools, ...); more are counted.

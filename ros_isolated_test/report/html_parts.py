@@ -15,10 +15,10 @@ import tempfile
 from html import escape
 from typing import IO
 
+from ros_isolated_test.report.counts import FileReport
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
 from ros_isolated_test.xunit.model import Case, Outcome
-from ros_isolated_test.xunit.report import FileReport
 
 #: Characters of a message, a failure's text and an output tail shown per case.
 MESSAGE_CHARS = 8 * 1024
