@@ -1,10 +1,11 @@
 """The report page put together: what it keeps while files are read, then its parts in order.
 
-:class:`Page` is all that is kept while result files are read: counts, a few distinct
-facts per kind, one bar per attempt and three spools of case blocks. Once every file is
-read, :func:`assemble` streams the page in reading order (the totals first although they
-are known last), copying the spools into it. Apart from the reading of each file
-(``html_report``) so that the page's layout reads in one place.
+:class:`Page` is all that is kept while result files are read: the counts, a few
+distinct facts per kind (and how many files did not record each), a few of the values
+that could not be drawn, one bar per attempt and three spools of case blocks. Once every
+file is read, :func:`assemble` streams the page in reading order (the totals first
+although they are known last), copying the spools into it. Apart from the reading of
+each file (``html_report``) so that the page's layout reads in one place.
 """
 
 from __future__ import annotations
@@ -12,24 +13,30 @@ from __future__ import annotations
 import datetime
 from collections.abc import Callable
 from html import escape
+from pathlib import Path
 from typing import IO
 
 from ros_isolated_test import __version__
 from ros_isolated_test.report import html_assets
+from ros_isolated_test.report.bounded_values import local
 from ros_isolated_test.report.counts import FileReport
-from ros_isolated_test.report.html_parts import Spool, attr, local, text
+from ros_isolated_test.report.html_parts import attr, text
 from ros_isolated_test.report.html_timeline import Bar, timeline_html
+from ros_isolated_test.report.spool import Spool
 from ros_isolated_test.xunit.timeline import DOMAIN_POOL
 
 #: Distinct values kept per fact (hosts, pools, ...); more are counted.
 FACT_VALUES = 12
-#: The facts of the run, as the header's table names them, and the property of each.
+#: Values that could not be drawn, named on the page; more are counted.
+ODD_VALUES = 20
+#: The facts of the run, as the header's table names them, the property of each (the
+#: host is the file's ``hostname``), and what a file of ours that lacks it means.
 FACTS = (
-    ("host", None),
-    ("domain pool", DOMAIN_POOL),
-    ("capacity", "capacity"),
-    ("discovery range", "ros_discovery_range"),
-    ("runner version", "runner_version"),
+    ("host", None, "not recorded"),
+    ("domain pool", DOMAIN_POOL, "no ID held"),
+    ("capacity", "capacity", "no resources asked for"),
+    ("discovery range", "ros_discovery_range", "not recorded (isolation off)"),
+    ("runner version", "runner_version", "not recorded"),
 )
 
 
@@ -37,9 +44,16 @@ class Page:
     """What the page needs once every file is read: counts, facts, bars, spools."""
 
     def __init__(self) -> None:
-        self.reports: list[FileReport] = []
+        #: Every file's counts, summed.
+        self.total = FileReport(Path())
         self.bars: list[Bar] = []
-        self.facts: dict[str, dict[str, int]] = {name: {} for name, _ in FACTS}
+        #: Per fact: files by value, files that did not record it, files past FACT_VALUES.
+        self.facts: dict[str, dict[str, int]] = {name: {} for name, _, _ in FACTS}
+        self.absent: dict[str, int] = {name: 0 for name, _, _ in FACTS}
+        self.more: dict[str, int] = {name: 0 for name, _, _ in FACTS}
+        #: "<file>: <value named>" for the first ODD_VALUES values not drawn; the count.
+        self.odd: list[str] = []
+        self.odd_count = 0
         self.files = 0
         self.foreign = 0
         self.attempts = 0
@@ -51,12 +65,21 @@ class Page:
         self.blocks: list[tuple[str, str, int, int, int, int, int]] = []
 
     def note(self, fact: str, value: str) -> None:
-        """Count ``value`` of ``fact``; beyond FACT_VALUES distinct ones only counted."""
+        """Count ``value`` of ``fact`` ("": not recorded); past FACT_VALUES only counted."""
         values = self.facts[fact]
-        if value in values or len(values) < FACT_VALUES:
+        if not value:
+            self.absent[fact] += 1
+        elif value in values or len(values) < FACT_VALUES:
             values[value] = values.get(value, 0) + 1
         else:
-            values[""] = values.get("", 0) + 1
+            self.more[fact] += 1
+
+    def name_odd(self, where: str, said: list[str]) -> None:
+        """Keep what a file's reading named (values not drawn), up to ODD_VALUES in all."""
+        for line in said:
+            self.odd_count += 1
+            if len(self.odd) < ODD_VALUES:
+                self.odd.append(f"{where}: {line}")
 
     def close(self) -> None:
         for spool in (self.failures, self.flaky, self.rest):
@@ -69,10 +92,9 @@ def assemble(page: Page, out: IO[bytes]) -> None:
     def put(text: str) -> None:
         out.write(text.encode("utf-8", "backslashreplace"))
 
-    totals = _totals(page.reports)
-    failed = totals["errors"] + totals["failures"]
-    verdict = "FAILED" if failed else "PASSED"
-    headline = _headline(totals)
+    total = page.total
+    verdict = "FAILED" if total.failed else "PASSED"
+    headline = _headline(total)
     put(
         "<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8>"
         '<meta http-equiv="Content-Security-Policy" '
@@ -84,20 +106,23 @@ def assemble(page: Page, out: IO[bytes]) -> None:
         f'<header class="banner {verdict.lower()}"><h1>{verdict}</h1>'
         f"<p>{escape(headline)}</p></header><main>"
     )
-    put(_totals_html(totals, page))
+    put(_totals_html(page))
     put(_facts_html(page))
     put(timeline_html(page.bars))
     put(
         '<div class=filterbar><input id=filter type=search placeholder="Filter tests by name" '
         'aria-label="Filter tests by name"></div>'
     )
-    failures = totals["errors"] + totals["failures"]
+    failures = total.errors + total.failures
     put(f"<section id=failures><h2>Failures and errors ({failures})</h2>")
     if page.failures.size:
         page.failures.copy_to(out)
     else:
         put("<p class=none>none</p>")
-    put(f"</section><section id=flaky><h2>Flaky: passed after failing ({totals['flaky']})</h2>")
+    flaky = f"Flaky: passed after failing ({total.flaky})"
+    if total.skipped_after_failing:
+        flaky += f", skipped after failing ({total.skipped_after_failing})"
+    put(f"</section><section id=flaky><h2>{flaky}</h2>")
     if page.flaky.size:
         page.flaky.copy_to(out)
     else:
@@ -108,39 +133,31 @@ def assemble(page: Page, out: IO[bytes]) -> None:
     put(f"<script>{html_assets.SCRIPT}</script></body></html>\n")
 
 
-def _totals(reports: list[FileReport]) -> dict[str, int]:
-    keys = ("tests", "errors", "failures", "skipped", "flaky")
-    found = {key: sum(getattr(item, key) for item in reports) for key in keys}
-    found["failed_then_not_run"] = sum(len(item.not_run_again) for item in reports)
-    return found
-
-
-def _headline(totals: dict[str, int]) -> str:
-    said = [
-        f"{totals['tests']} tests",
-        f"{totals['failures']} failures",
-        f"{totals['errors']} errors",
-    ]
-    said.append(f"{totals['skipped']} skipped")
-    if totals["flaky"]:
-        said.append(f"{totals['flaky']} flaky")
+def _headline(total: FileReport) -> str:
+    said = [f"{total.tests} tests", f"{total.failures} failures", f"{total.errors} errors"]
+    said.append(f"{total.skipped} skipped")
+    if total.flaky:
+        said.append(f"{total.flaky} flaky")
     return ", ".join(said)
 
 
-def _totals_html(totals: dict[str, int], page: Page) -> str:
-    passed = totals["tests"] - totals["errors"] - totals["failures"] - totals["skipped"]
+def _totals_html(page: Page) -> str:
+    """The counts that add up to the tests, then the parts of them counted apart."""
+    total = page.total
     items = [
-        ("tests", totals["tests"], ""),
-        ("passed", passed - totals["flaky"], ""),
-        ("failures", totals["failures"], "bad" if totals["failures"] else ""),
-        ("errors", totals["errors"], "bad" if totals["errors"] else ""),
-        ("flaky", totals["flaky"], "warn" if totals["flaky"] else ""),
-        ("skipped", totals["skipped"], ""),
+        ("tests", total.tests, ""),
+        ("passed", total.passed, ""),
+        ("failures", total.failures, "bad" if total.failures else ""),
+        ("errors", total.errors, "bad" if total.errors else ""),
+        ("flaky", total.flaky, "warn" if total.flaky else ""),
+        ("skipped", total.skipped, ""),
         ("result files", page.files, ""),
         ("attempts drawn", page.attempts, ""),
     ]
-    if totals["failed_then_not_run"]:
-        items.insert(4, ("failed, then not run", totals["failed_then_not_run"], "bad"))
+    if total.skipped_after_failing:
+        items.insert(6, ("skipped after failing", total.skipped_after_failing, "warn"))
+    if total.failed_then_not_run:
+        items.insert(4, ("failed, then not run", total.failed_then_not_run, "bad"))
     cells = "".join(
         f'<div class="total {style}" id="total-{escape(name.replace(" ", "-").replace(",", ""))}">'
         f"<b>{value}</b>{escape(name)}</div>"
@@ -150,20 +167,10 @@ def _totals_html(totals: dict[str, int], page: Page) -> str:
 
 
 def _facts_html(page: Page) -> str:
-    rows = []
-    for fact, _ in FACTS:
-        values = page.facts[fact]
-        shown_values = [
-            f"{text(value, 256)}" + (f" ({count} files)" if len(values) > 1 else "")
-            for value, count in sorted(values.items())
-            if value
-        ]
-        if "" in values:
-            shown_values.append(f"and {values['']} more file(s) with other values")
-        rows.append(
-            f'<tr><th>{escape(fact)}</th><td id="fact-{fact.replace(" ", "-")}">'
-            f"{'; '.join(shown_values) or '<span class=none>not recorded</span>'}</td></tr>"
-        )
+    rows = [
+        f"<tr><th>{escape(fact)}</th>{_fact_cell(page, fact, absent)}</tr>"
+        for fact, _, absent in FACTS
+    ]
     if page.bars:
         first = min(bar.start for bar in page.bars)
         last = max(bar.end for bar in page.bars)
@@ -176,11 +183,40 @@ def _facts_html(page: Page) -> str:
             f"<tr><th>other producers</th><td>{page.foreign} result file(s) not written by "
             "ros-isolated-test (listed; on the timeline where they carry a timestamp)</td></tr>"
         )
+    if page.odd_count:
+        named = "".join(f"<li>{text(line, 512)}</li>" for line in page.odd)
+        if page.odd_count > len(page.odd):
+            named += f"<li>and {page.odd_count - len(page.odd)} more</li>"
+        rows.append(
+            f"<tr><th>not drawn</th><td id=odd-values>{page.odd_count} value(s) a result file "
+            f"gave that the page cannot draw, drawn as unknown:<ul>{named}</ul></td></tr>"
+        )
     rows.append(
         f"<tr><th>page</th><td>ros-isolated-test {escape(__version__)}, "
         f"{escape(local(datetime.datetime.now().timestamp()))}</td></tr>"
     )
     return f"<h2>Run</h2><table class=facts>{''.join(rows)}</table>"
+
+
+def _fact_cell(page: Page, fact: str, absent: str) -> str:
+    """A fact's values, each with its files when the files differ, and who did not say."""
+    values, missing, more = page.facts[fact], page.absent[fact], page.more[fact]
+    differs = len(values) + bool(missing) + bool(more) > 1
+    said = [
+        text(value, 256) + (f" ({count} file(s))" if differs else "")
+        for value, count in sorted(values.items())
+    ]
+    if missing:
+        said.append(
+            f"<span class=none>{escape(absent)}</span>"
+            + (f" ({missing} file(s))" if differs else "")
+        )
+    if more:
+        said.append(f"and {more} more file(s) with other values")
+    head = "<b class=differs>differs between files:</b> " if differs else ""
+    cell = "; ".join(said) or "<span class=none>not recorded</span>"
+    name = fact.replace(" ", "-")
+    return f'<td id="fact-{name}" data-differs="{str(differs).lower()}">{head}{cell}</td>'
 
 
 def _grouped(page: Page, out: IO[bytes], put: Callable[[str], None]) -> None:

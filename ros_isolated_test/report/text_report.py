@@ -3,73 +3,105 @@
 Failed-then-not-run and flaky cases are listed apart after the files, with their failed
 attempts under ``--verbose``; ``--json`` says the same with every failed and flaky case.
 Names are shown as ``status`` shows them: a file name cannot forge a line.
+
+Written in bounded memory however many cases fail: each file's lines (or JSON row) and
+its cases for the lists after the files go to spools (temporary files) as it is read,
+and only the counts are kept; :meth:`TextReport.write` copies the spools out in order.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
+from types import TracebackType
 
-from ros_isolated_test.report.counts import FileReport, summary_line, totals
+from ros_isolated_test.report.counts import (
+    FileReport,
+    listed_as_flaky,
+    not_run_again,
+    summary_line,
+)
+from ros_isolated_test.report.spool import Spool
+from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.text import display_text
-from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
 from ros_isolated_test.xunit.model import Case, Outcome
 
-
-def text(reports: list[FileReport], verbose: bool) -> str:
-    """The per-file lines of colcon, cases failed then not run, flaky cases, the summary last."""
-    lines: list[str] = []
-    for item in reports:
-        counts = summary_line(item.tests, item.errors, item.failures, item.skipped)
-        lines.append(f"{_shown_path(item.path)}: {counts}")
-        if verbose:
-            for case in item.failed_cases:
-                lines.append(f"- {_shown_case(case)} ({case.outcome.value})")
-                lines.extend(f"  {line}" for line in _first_lines(case.message))
-    not_run = [(item, case) for item in reports for case in item.not_run_again]
-    if not_run:
-        lines.append("")
-        lines.append(
-            f"Failed, then not run: {len(not_run)} case(s) failed and no later attempt ran "
-            "them (counted as failures):"
-        )
-        lines.extend(_history(not_run, "then not run", verbose))
-    flaky = [(item, case) for item in reports for case in item.flaky_cases]
-    if flaky:
-        passed = sum(1 for _, case in flaky if case.outcome is Outcome.PASSED)
-        said = [f"{passed} case(s) passed after failing"] if passed else []
-        if len(flaky) > passed:
-            said.append(f"{len(flaky) - passed} case(s) skipped after failing")
-        lines.append("")
-        lines.append(f"Flaky: {', '.join(said)} (not counted as failures):")
-        lines.extend(_history(flaky, "", verbose))
-    count = totals(reports)
-    summary = summary_line(count["tests"], count["errors"], count["failures"], count["skipped"])
-    lines.extend(("", f"Summary: {summary}"))
-    return "\n".join(lines) + "\n"
+#: Lines of a message ``--verbose`` shows.
+MESSAGE_LINES = 20
 
 
-def as_json(reports: list[FileReport]) -> str:
-    """The same as :func:`text`, every file's failed and flaky cases included."""
-    rows = [
-        {
+class TextReport:
+    """What ``report`` prints (text, or JSON with ``as_json``), gathered file by file."""
+
+    def __init__(self, verbose: bool = False, as_json: bool = False) -> None:
+        self.verbose = verbose
+        self.as_json = as_json
+        #: Every file's counts, summed.
+        self.total = FileReport(Path())
+        self._files = Spool()
+        self._not_run = Spool()
+        self._flaky = Spool()
+        self._rows = 0
+
+    def __enter__(self) -> TextReport:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for spool in (self._files, self._not_run, self._flaky):
+            spool.close()
+
+    def add(self, item: FileRead) -> None:
+        """One file read: its counts summed, its lines spooled, its cases forgotten."""
+        report = item.report
+        self.total.include(report)
+        if self.as_json:
+            self._add_row(item)
+            return
+        counts = summary_line(report.tests, report.errors, report.failures, report.skipped)
+        self._files.write(f"{_shown_path(report.path)}: {counts}\n")
+        for case in item.cases:
+            if case.outcome.failed and self.verbose:
+                self._files.write(f"- {_shown_case(case)} ({case.outcome.value})\n")
+                self._files.write("".join(f"  {line}\n" for line in _first_lines(case.message)))
+            if not_run_again(case):
+                self._history(self._not_run, case, report.path, "then not run")
+            elif listed_as_flaky(case):
+                after = "" if case.outcome is Outcome.PASSED else f"then {case.outcome.value}"
+                self._history(self._flaky, case, report.path, after)
+
+    def _history(self, spool: Spool, case: Case, path: Path, after: str) -> None:
+        """One line for a case: its failed attempts, what came after, its file; ``-v``: each."""
+        history = ", ".join(filter(None, (f"{len(case.attempts)} failed attempt(s)", after)))
+        spool.write(f"- {_shown_case(case)} ({history}) in {_shown_path(path)}\n")
+        if self.verbose:
+            for attempt in case.attempts:
+                spool.write(f"  {attempt.kind}: {_first_lines(attempt.message)[0]}\n")
+
+    def _add_row(self, item: FileRead) -> None:
+        """The file's JSON object, indented as a member of the ``files`` list."""
+        row = {
             "path": str(item.path),
-            "tests": item.tests,
-            "errors": item.errors,
-            "failures": item.failures,
-            "skipped": item.skipped,
-            "flaky": item.flaky,
-            "failed_then_not_run": len(item.not_run_again),
+            **item.report.as_dict(),
             "failed_cases": [
                 {
                     "classname": case.classname,
                     "name": case.name,
                     "outcome": case.outcome.value,
                     "message": case.message,
-                    "failed_then_not_run": case.type == NOT_RUN_AGAIN_TYPE,
+                    "failed_then_not_run": not_run_again(case),
                     "earlier_failures": _earlier(case),
                 }
-                for case in item.failed_cases
+                for case in item.cases
+                if case.outcome.failed
             ],
             "flaky_cases": [
                 {
@@ -78,25 +110,38 @@ def as_json(reports: list[FileReport]) -> str:
                     "outcome": case.outcome.value,
                     "earlier_failures": _earlier(case),
                 }
-                for case in item.flaky_cases
+                for case in item.cases
+                if listed_as_flaky(case)
             ],
         }
-        for item in reports
-    ]
-    return json.dumps({"files": rows, "total": totals(reports)}, indent=2)
+        text = json.dumps(row, indent=2).replace("\n", "\n    ")
+        self._files.write(f"{',' if self._rows else ''}\n    {text}")
+        self._rows += 1
 
-
-def _history(cases: list[tuple[FileReport, Case]], then: str, verbose: bool) -> list[str]:
-    """One line per case: its failed attempts, what came after, its file; ``-v``: each one."""
-    lines: list[str] = []
-    for item, case in cases:
-        after = then or ("" if case.outcome is Outcome.PASSED else f"then {case.outcome.value}")
-        history = ", ".join(filter(None, (f"{len(case.attempts)} failed attempt(s)", after)))
-        lines.append(f"- {_shown_case(case)} ({history}) in {_shown_path(item.path)}")
-        if verbose:
-            for attempt in case.attempts:
-                lines.append(f"  {attempt.kind}: {_first_lines(attempt.message)[0]}")
-    return lines
+    def write(self, put: Callable[[str], object]) -> None:
+        """Everything, in order, to ``put`` in pieces of bounded size."""
+        if self.as_json:
+            put('{\n  "files": [')
+            self._files.copy_text(put)
+            totals = json.dumps(self.total.as_dict(), indent=2).replace("\n", "\n  ")
+            put(f'{chr(10) + "  " if self._rows else ""}],\n  "total": {totals}\n}}\n')
+            return
+        self._files.copy_text(put)
+        total = self.total
+        if total.failed_then_not_run:
+            put(
+                f"\nFailed, then not run: {total.failed_then_not_run} case(s) failed and no "
+                "later attempt ran them (counted as failures):\n"
+            )
+            self._not_run.copy_text(put)
+        if total.flaky or total.skipped_after_failing:
+            said = [f"{total.flaky} case(s) passed after failing"] if total.flaky else []
+            if total.skipped_after_failing:
+                said.append(f"{total.skipped_after_failing} case(s) skipped after failing")
+            put(f"\nFlaky: {', '.join(said)} (not counted as failures):\n")
+            self._flaky.copy_text(put)
+        summary = summary_line(total.tests, total.errors, total.failures, total.skipped)
+        put(f"\nSummary: {summary}\n")
 
 
 def _shown_path(path: Path) -> str:
@@ -119,4 +164,4 @@ def _earlier(case: Case) -> list[dict[str, str]]:
 
 
 def _first_lines(message: str) -> list[str]:
-    return (message or "(no message)").splitlines()[:20] or ["(no message)"]
+    return (message or "(no message)").splitlines()[:MESSAGE_LINES] or ["(no message)"]

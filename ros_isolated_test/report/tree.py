@@ -1,8 +1,10 @@
-"""The result files of a tree: found in a stable order, each read as ``report`` counts it.
+"""The result files of a tree: found in a stable order, each read once, one at a time.
 
 Canonical and raw producer files alike are read through the same reader and normaliser
 the runner uses, so the counts are the ones a canonical file of it would carry. A
-folder that cannot be read is an error, never a quiet gap.
+folder that cannot be read is an error, never a quiet gap. Each file is handed on
+(:func:`read_tree`) and forgotten before the next is read: what a reader keeps of it is
+its own business, so a tree of any size costs what its largest file costs.
 """
 
 from __future__ import annotations
@@ -13,20 +15,36 @@ from pathlib import Path
 
 from ros_isolated_test.report.counts import FileReport, counted
 from ros_isolated_test.text import display_text
-from ros_isolated_test.xunit import normalise, reader
+from ros_isolated_test.xunit import normalise, raw, reader
 from ros_isolated_test.xunit.canonical import test_name_of
 from ros_isolated_test.xunit.model import Case, Outcome
 
 
-def reports(paths: Iterable[Path]) -> list[FileReport]:
-    """A report of each result file under ``paths``, and of each folder it could not read."""
-    found: list[FileReport] = []
+class FileRead:
+    """One result file as read: its counts, its canonical cases and the raw reading.
+
+    ``read`` is None for a folder that could not be listed (its one error case).
+    """
+
+    __slots__ = ("cases", "read", "report")
+
+    def __init__(self, report: FileReport, cases: list[Case], read: raw.ReadResult | None) -> None:
+        self.report = report
+        self.cases = cases
+        self.read = read
+
+    @property
+    def path(self) -> Path:
+        return self.report.path
+
+
+def read_tree(paths: Iterable[Path]) -> Iterator[FileRead]:
+    """Each result file under ``paths`` read, and each folder it could not read, in order."""
     for item in result_files(paths):
         if isinstance(item, OSError):
-            found.append(unreadable_folder(item))
-        elif (report := report_file(item)) is not None:
-            found.append(report)
-    return found
+            yield unreadable_folder(item)
+        elif (found := read_file(item)) is not None:
+            yield found
 
 
 def result_files(paths: Iterable[Path]) -> Iterator[Path | OSError]:
@@ -56,7 +74,7 @@ def _taken(errors: list[OSError]) -> Iterator[OSError]:
     return iter(found)
 
 
-def unreadable_folder(error: OSError) -> FileReport:
+def unreadable_folder(error: OSError) -> FileRead:
     """A folder ``report`` cannot list, as one error case naming it and how to fix it."""
     path = Path(error.filename)
     text = str(path)
@@ -65,13 +83,14 @@ def unreadable_folder(error: OSError) -> FileReport:
         "the result files in it are not counted. Let this user read and enter it "
         "(chmod a+rx), or run report as one who may."
     )
-    case = Case.saying(path.name or str(path), "result folder", Outcome.ERROR, message)
-    return FileReport(path=path, tests=1, errors=1, failed_cases=[case])
+    cases = [Case.saying(path.name or str(path), "result folder", Outcome.ERROR, message)]
+    return FileRead(counted(path, cases), cases, None)
 
 
-def report_file(path: Path) -> FileReport | None:
-    """Counts for one file; None for XML that is not a test result (a ctest Test.xml)."""
+def read_file(path: Path) -> FileRead | None:
+    """One file read and counted; None for XML that is not a test result (a ctest Test.xml)."""
     read = reader.read(path)
     if read.root_tag is not None and not read.is_xunit:
         return None
-    return counted(path, normalise.cases_from(read, None, test_name_of(path)))
+    cases = normalise.cases_from(read, None, test_name_of(path))
+    return FileRead(counted(path, cases), cases, read)

@@ -1,61 +1,213 @@
-"""``report.counts``: what a result file counts, from its cases, as ``report`` prints it.
+"""``report.counts``: what a result file counts, from its cases: every count adds up.
 
-A flaky case counts as passed and is listed apart; a case that failed in every attempt
-is a failure, never flaky; a case that failed and was then not run is a failure, listed
-apart too. The reruns are real runs through ``run --rerun-failures``.
+Each case counts once, by its final outcome, whatever came before: ``tests`` is the sum
+of passed, failures, errors, flaky and skipped, in the text, the JSON and on the page
+alike. A flaky case (passed after failing) is listed apart; a case that failed in every
+attempt is a failure, never flaky; a case that failed and was then not run is a failure,
+and one skipped after failing a skip, each counted apart too. The reruns are real runs
+through ``run --rerun-failures``.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
 from helpers.commands import run_cli
-from helpers.report_text import (
-    LINE,
-    file_lines,
-    summary_of,
-)
+from helpers.report_page import page_totals, parsed
+from helpers.report_text import LINE, file_lines, summary_of
 from lxml import etree
 
-from ros_isolated_test.report.counts import counted, summary_line, totals
+from ros_isolated_test.report.counts import KEYS, PARTS, counted, summary_line
 from ros_isolated_test.xunit import validate
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE, merge_attempts
-from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
-# --- the counts, from the cases --------------------------------------------------------------
+# --- the counts, from the cases: one per outcome across attempts, and they add up ------------
+
+P, F, E, S = Outcome.PASSED, Outcome.FAILURE, Outcome.ERROR, Outcome.SKIPPED
+#: Outcomes of one case in each attempt (None: not in that attempt) -> the count it goes
+#: to, and the part of that count it is too (or None).
+SERIES: dict[str, tuple[list[Outcome | None], str, str | None]] = {
+    "passed": ([P], "passed", None),
+    "failed": ([F], "failures", None),
+    "error": ([E], "errors", None),
+    "skipped": ([S], "skipped", None),
+    "failed, then passed": ([F, P], "flaky", None),
+    "error, then passed": ([E, P], "flaky", None),
+    "failed twice, then passed": ([F, F, P], "flaky", None),
+    "failed, then skipped": ([F, S], "skipped", "skipped_after_failing"),
+    "error, then skipped": ([E, S], "skipped", "skipped_after_failing"),
+    "failed, then passed, then skipped": ([F, P, S], "skipped", "skipped_after_failing"),
+    "failed, then not run": ([F, None], "failures", "failed_then_not_run"),
+    "error, then not run": ([E, None], "errors", "failed_then_not_run"),
+    "failed every attempt": ([F, F], "failures", None),
+    "error, then failed": ([E, F], "failures", None),
+    "failed, then error": ([F, E], "errors", None),
+    "passed, then failed": ([P, F], "failures", None),
+    "skipped, then failed": ([S, F], "failures", None),
+    "passed, then not run": ([P, None], "skipped", None),
+    "skipped, then passed": ([S, P], "passed", None),
+}
 
 
-def test_counts_come_from_the_cases_and_a_flaky_pass_is_apart() -> None:
-    flaky = Case("pkg.C", "flaky", attempts=[Attempt("flakyFailure", "first try")])
-    cases = [
-        Case("pkg.C", "passed"),
-        Case.saying("pkg.C", "failed", Outcome.FAILURE, "m"),
-        Case.saying("pkg.C", "errored", Outcome.ERROR, "m"),
-        Case.saying("pkg.C", "not run", Outcome.FAILURE, "m", NOT_RUN_AGAIN_TYPE),
-        Case.saying("pkg.C", "skipped", Outcome.SKIPPED, "m"),
-        flaky,
-    ]
-    report = counted(Path("t.xml"), cases)
-    assert (report.tests, report.errors, report.failures, report.skipped) == (6, 1, 2, 1)
-    assert [case.name for case in report.failed_cases] == ["failed", "errored", "not run"]
-    assert [case.name for case in report.not_run_again] == ["not run"]
-    assert (report.flaky_cases, report.failed) == ([flaky], True)
-    assert totals([report, counted(Path("u.xml"), cases[:1])]) == {
-        "tests": 7,
-        "errors": 1,
-        "failures": 2,
-        "skipped": 1,
-        "flaky": 1,
-        "failed_then_not_run": 1,
-    }
-    assert not counted(Path("u.xml"), [cases[0], cases[4], flaky]).failed  # the control
+def merged(series: list[Outcome | None]) -> Suite:
+    """The file of a test run once per outcome in ``series``: case ``x``, and ``steady``."""
+    attempts = []
+    for outcome in series:
+        cases = [Case("pkg.C", "steady")]
+        if outcome is P:
+            cases.insert(0, Case("pkg.C", "x"))
+        elif outcome is not None:
+            cases.insert(0, Case.saying("pkg.C", "x", outcome, f"{outcome.value} here"))
+        attempts.append(Suite("pkg.t", cases, 1.0, validate.timestamp(), "h", {}))
+    return attempts[0] if len(attempts) == 1 else merge_attempts(attempts)
+
+
+def adds_up(counts: dict[str, int]) -> bool:
+    """Every case in exactly one count, none negative; the parts within their counts."""
+    return (
+        all(value >= 0 for value in counts.values())
+        and counts["tests"] == sum(counts[part] for part in PARTS)
+        and counts["failed_then_not_run"] <= counts["failures"] + counts["errors"]
+        and counts["skipped_after_failing"] <= counts["skipped"]
+    )
+
+
+@pytest.mark.parametrize("name", SERIES)
+def test_each_outcome_across_attempts_counts_once_and_the_counts_add_up(name: str) -> None:
+    series, count, part = SERIES[name]
+    report = counted(Path("t.xml"), merged(series).cases)
+    expected = dict.fromkeys(KEYS, 0) | {"tests": 2, "passed": 1}  # ``steady`` passed
+    expected[count] += 1
+    if part is not None:
+        expected[part] += 1
+    assert report.as_dict() == expected
+    assert adds_up(report.as_dict())
+    assert report.failed == (count in ("failures", "errors"))
+
+
+def test_control_the_check_sees_counts_that_do_not_add_up() -> None:
+    """Today's main counted a case skipped after failing as flaky and skipped: -1 passed."""
+    wrong = dict.fromkeys(KEYS, 0) | {"tests": 1, "skipped": 1, "flaky": 1, "passed": -1}
+    assert not adds_up(wrong)
+    assert not adds_up(dict.fromkeys(KEYS, 0) | {"tests": 2, "passed": 1})  # one missing
+    assert adds_up(dict.fromkeys(KEYS, 0) | {"tests": 1, "skipped": 1})
+
+
+def test_a_tree_of_every_outcome_adds_up_alike_in_text_json_and_the_page(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    tree = tmp_path / "tree"
+    tree.mkdir()
+    for number, (series, _, _) in enumerate(SERIES.values()):
+        (tree / f"t{number:02d}.xml").write_bytes(validate.render(merged(series)).data)
+    page = tmp_path / "page.html"
+    proc = run_cli(["report", "--json", "--html", str(page), str(tree)], env)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    total = json.loads(proc.stdout)["total"]
+    expected = dict.fromkeys(KEYS, 0) | {"tests": 2 * len(SERIES), "passed": len(SERIES)}
+    for _, count, part in SERIES.values():
+        expected[count] += 1
+        if part is not None:
+            expected[part] += 1
+    assert total == expected and adds_up(total)
+    assert total["flaky"] == 3 and total["skipped_after_failing"] == 3  # the control: seen
+    for row in json.loads(proc.stdout)["files"]:
+        assert adds_up({key: row[key] for key in KEYS}), row
+    shown = page_totals(parsed(page.read_text(encoding="utf-8")))
+    assert shown == {key.replace("_", " "): value for key, value in total.items() if value}
+    text = run_cli(["report", str(tree)], env)
+    assert summary_of(text.stdout) == (
+        total["tests"],
+        total["errors"],
+        total["failures"],
+        total["skipped"],
+    )
+    assert (
+        f"Flaky: {total['flaky']} case(s) passed after failing, "
+        f"{total['skipped_after_failing']} case(s) skipped after failing"
+    ) in text.stdout
+    assert f"Failed, then not run: {total['failed_then_not_run']} case(s)" in text.stdout
 
 
 def test_the_summary_is_in_colcons_words() -> None:
     assert summary_line(3, 1, 0, 2) == "3 tests, 1 errors, 0 failures, 2 skipped"
     assert LINE.match(f"a.xml: {summary_line(1, 0, 0, 0)}")
+
+
+#: A pytest file whose cases fail in the first attempt (the state folder is empty) and
+#: then pass or skip: ``{state}`` is the folder, made fresh for the run.
+PYTEST_FILE = """
+import pathlib
+import pytest
+
+STATE = pathlib.Path({state!r})
+
+
+def _first(name):
+    marker = STATE / name
+    if marker.exists():
+        return False
+    marker.touch()
+    return True
+
+
+def test_flaky():
+    assert not _first("flaky"), "the first attempt fails"
+
+
+def test_passing():
+    pass
+
+
+def test_skipped_after_failing():
+    assert not _first("skip"), "the first attempt fails"
+    pytest.skip("the rerun skips")
+"""
+
+
+def test_a_real_rerun_of_pytest_counts_the_flaky_the_passing_and_the_skipped_after_failing(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """``run --rerun-failures 1`` over pytest: 1 passed, 1 flaky, 1 skipped (after failing)."""
+    state = tmp_path / "state"
+    state.mkdir()
+    (tmp_path / "test_three.py").write_text(PYTEST_FILE.format(state=str(state)))
+    result = tmp_path / "results" / "pkg_a" / "three.xml"
+    args = ["run", "--package-name", "pkg_a", "--rerun-failures", "1", "--junit-xml"]
+    pytest_args = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "test_three.py"]
+    proc = run_cli(
+        [*args, str(result), "--", *pytest_args, f"--junitxml={result}"], env, cwd=tmp_path
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "attempt 2 of 2: attempt 1 failed" in proc.stdout, proc.stdout
+    page = tmp_path / "page.html"
+    as_json = run_cli(["report", "--json", "--html", str(page), str(result)], env)
+    assert as_json.returncode == 0, as_json.stdout + as_json.stderr
+    total = json.loads(as_json.stdout)["total"]
+    assert total == dict.fromkeys(KEYS, 0) | {
+        "tests": 3,
+        "passed": 1,
+        "flaky": 1,
+        "skipped": 1,
+        "skipped_after_failing": 1,
+    }
+    assert page_totals(parsed(page.read_text(encoding="utf-8"))) == {
+        "tests": 3,
+        "passed": 1,
+        "flaky": 1,
+        "skipped": 1,
+        "skipped after failing": 1,
+    }
+    text = run_cli(["report", str(result)], env)
+    assert summary_of(text.stdout) == (3, 0, 0, 1)
+    assert (
+        "Flaky: 1 case(s) passed after failing, 1 case(s) skipped after failing "
+        "(not counted as failures):"
+    ) in text.stdout
 
 
 # --- reruns: flaky cases apart, never failures -------------------------------------------------
@@ -130,13 +282,11 @@ def test_json_lists_flaky_cases_and_every_failed_attempt(
     proc = run_cli(["report", "--json", str(rerun_tree)], env, cwd=rerun_tree)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     data = json.loads(proc.stdout)
-    assert data["total"] == {
+    assert data["total"] == dict.fromkeys(KEYS, 0) | {
         "tests": 4,
-        "errors": 0,
+        "passed": 2,
         "failures": 1,
-        "skipped": 0,
         "flaky": 1,
-        "failed_then_not_run": 0,
     }
     rows = {Path(row["path"]).name: row for row in data["files"]}
     assert rows["flaky.xml"]["flaky"] == 1

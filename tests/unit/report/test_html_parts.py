@@ -16,7 +16,8 @@ from helpers.report_page import parsed, report_page
 from lxml import html
 
 from ros_isolated_test.report.counts import counted
-from ros_isolated_test.report.html_parts import Spool, attr, text, write_case, write_suite
+from ros_isolated_test.report.html_parts import attr, text, write_case, write_suite
+from ros_isolated_test.report.spool import Spool
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome
 
@@ -43,24 +44,6 @@ def test_text_is_cut_to_its_head_or_tail_and_escaped() -> None:
     assert text("caf\udce9 \ud800", 100) == "caf\\xe9 \\ud800"
     assert text("short", 5) == "short"  # the control: at the limit, nothing is cut
     assert attr('say "<hi>"') == "say &quot;&lt;hi&gt;&quot;"
-
-
-def test_a_spool_copies_any_part_of_what_was_written() -> None:
-    spool = Spool()
-    try:
-        spool.write("héllo ")
-        spool.write("world")
-        assert spool.size == len("héllo world".encode())
-        whole, part = io.BytesIO(), io.BytesIO()
-        spool.copy_to(whole)
-        spool.copy_to(part, offset=len("héllo ".encode()), length=3)
-        assert (whole.getvalue().decode(), part.getvalue()) == ("héllo world", b"wor")
-        spool.write("!")  # after a copy, writing goes on at the end
-        again = io.BytesIO()
-        spool.copy_to(again)
-        assert again.getvalue().decode() == "héllo world!"
-    finally:
-        spool.close()
 
 
 def test_a_failed_case_shows_its_message_its_text_and_the_tail_of_its_output() -> None:

@@ -23,28 +23,32 @@ from helpers.xunit import SAMPLES
 
 from ros_isolated_test.atomic_file import NotReplaceableError
 from ros_isolated_test.report import html_report
-from ros_isolated_test.report.tree import reports as tree_reports
+from ros_isolated_test.report.tree import read_tree
 from ros_isolated_test.xunit import serialise
 from ros_isolated_test.xunit.model import Case, Suite
 
 
-def test_the_page_replaces_its_destination_whole_and_gives_each_files_report(
+def test_the_page_replaces_its_destination_whole_and_hands_on_each_file_as_read(
     tmp_path: Path,
 ) -> None:
     tree = tmp_path / "tree"
-    result_tree.write_tree(tree, 6, 2)
+    result_tree.write_tree(tree, 60, 2)
     (tree / "Test.xml").write_text('<Site Name="vm"><Testing/></Site>')  # no result: skipped
     destination = tmp_path / "out" / "page.html"
     destination.parent.mkdir()
     destination.write_text("an old page")
-    reports = html_report.write([tree], destination)
-    expected = tree_reports([tree])
-    assert [(item.path, item.tests, item.failures) for item in reports] == [
-        (item.path, item.tests, item.failures) for item in expected
-    ]
-    assert len(reports) == 6
+    handed: list[tuple[Path, int, int]] = []
+    total = html_report.write(
+        [tree],
+        destination,
+        lambda item: handed.append((item.path, item.report.tests, item.report.failures)),
+    )
+    expected = [(item.path, item.report.tests, item.report.failures) for item in read_tree([tree])]
+    assert handed == expected and len(handed) == 60
+    assert (total.tests, total.failures) == (120, sum(failures for _, _, failures in handed))
+    assert total.failures > 0  # the made-up tree has failures: they are counted
     page = parsed(destination.read_text(encoding="utf-8"))
-    assert len(page.xpath("//details[@class='suite']")) == 6
+    assert len(page.xpath("//details[@class='suite']")) == 60
     assert os.listdir(destination.parent) == ["page.html"]  # no temporary file left
     assert oct(destination.stat().st_mode & 0o777) == oct(0o644)
 
@@ -86,7 +90,7 @@ def test_a_destination_a_write_would_replace_is_refused_before_anything_is_read(
         html_report.write(paths(), tmp_path)
     assert read == [] and fifo.exists() and not fifo.is_file()
     # The null device discards the page; the files are read all the same (the control).
-    assert len(html_report.write(paths(), Path(os.devnull))) == 2
+    assert html_report.write(paths(), Path(os.devnull)).tests == 2
     assert read == [tree]
 
 
