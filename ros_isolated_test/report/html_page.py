@@ -21,7 +21,7 @@ from ros_isolated_test.report import html_assets
 from ros_isolated_test.report.bounded_values import local
 from ros_isolated_test.report.counts import FileReport
 from ros_isolated_test.report.html_parts import attr, text
-from ros_isolated_test.report.html_timeline import Bar, timeline_html
+from ros_isolated_test.report.html_timeline import Bar, write_timeline
 from ros_isolated_test.report.spool import Spool
 from ros_isolated_test.xunit.timeline import DOMAIN_POOL
 
@@ -108,7 +108,7 @@ def assemble(page: Page, out: IO[bytes]) -> None:
     )
     put(_totals_html(page))
     put(_facts_html(page))
-    put(timeline_html(page.bars))
+    write_timeline(page.bars, put)
     put(
         '<div class=filterbar><input id=filter type=search placeholder="Filter tests by name" '
         'aria-label="Filter tests by name"></div>'

@@ -237,10 +237,18 @@ _STATES = (
 
 def timeline_html(bars: list[Bar]) -> str:
     """The bars, one row per (host, domain ID), lanes only where bars overlap in a row."""
+    parts: list[str] = []
+    write_timeline(bars, parts.append)
+    return "".join(parts)
+
+
+def write_timeline(bars: list[Bar], put: Callable[[str], object]) -> None:
+    """:func:`timeline_html` written piece by piece: a page of many bars is never one string."""
     legend = "".join(f"<span><i class=k-{key}></i>{escape(text)}</span>" for key, text in _STATES)
     head = f"<h2>Timeline</h2><div class=legend>{legend}</div>"
     if not bars:
-        return head + "<p class=none>No result file says when it ran: nothing to draw.</p>"
+        put(head + "<p class=none>No result file says when it ran: nothing to draw.</p>")
+        return
     t0 = min(bar.start for bar in bars)
     low = min(bar.start - bar.wait_domain - bar.wait_resources for bar in bars)
     high = max(bar.end for bar in bars)
@@ -259,16 +267,16 @@ def timeline_html(bars: list[Bar]) -> str:
     def place(begin: float, end: float) -> str:
         return f"left:{pos(begin)};width:{(end - begin) / span * 100:.4f}%"
 
-    parts = [
-        head,
+    put(head)
+    put(
         f'<div id=timeline data-t0="{t0:.6f}" data-low="{low - t0:.6f}" '
-        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}"><div class=tgrid>',
-    ]
+        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}"><div class=tgrid>'
+    )
     for tick in _ticks(low - t0, high - t0):
         # A label at the right edge would be cut: its line alone says enough.
         label = _tick_label(tick) if (t0 + tick - low) / span < 0.95 else ""
-        parts.append(f'<div class=tick style="left:{pos(t0 + tick)}"><span>{label}</span></div>')
-    parts.append("</div><div class=taxis></div>")
+        put(f'<div class=tick style="left:{pos(t0 + tick)}"><span>{label}</span></div>')
+    put("</div><div class=taxis></div>")
     for (host, _, _), members in sorted(rows.items()):
         members.sort(key=lambda bar: (bar.start, bar.end))
         lanes: list[float] = []
@@ -286,16 +294,15 @@ def timeline_html(bars: list[Bar]) -> str:
             name = f"{host or '(host not recorded)'} · {name}"
         clash = " clash" if domain and len(lanes) > 1 else ""
         title = " (used by two tests at once)" if clash else ""
-        parts.append(
+        put(
             f'<div class="trow{clash}" data-row="{attr(name)}" data-host="{attr(host)}" '
             f'data-domain="{attr(domain)}"><div class=tlabel title="{attr(name + title)}">'
             f'{text(name, 128)}</div><div class=tlane style="--lanes:{len(lanes)}">'
         )
         for bar, lane in placed:
-            parts.append(_bar_html(bar, lane, t0, span, place))
-        parts.append("</div></div>")
-    parts.append(f"</div><p class=where>0 s = {escape(local(t0))}, the earliest start.</p>")
-    return "".join(parts)
+            put(_bar_html(bar, lane, t0, span, place))
+        put("</div></div>")
+    put(f"</div><p class=where>0 s = {escape(local(t0))}, the earliest start.</p>")
 
 
 def _bar_html(

@@ -9,6 +9,7 @@ works as a CI artifact opened offline.
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 
 from helpers import chromium, result_tree
@@ -84,3 +85,41 @@ def test_the_page_names_nothing_to_fetch_and_forbids_fetching(
         "//cdn.example/c.png",
         "d.png",
     ]
+
+
+def _fact(page: html.HtmlElement, fact: str) -> tuple[str, str]:
+    [cell] = page.xpath(f"//td[@id='fact-{fact}']")
+    return cell.get("data-differs"), " ".join(cell.text_content().split())
+
+
+def test_the_run_table_says_when_files_differ_instead_of_showing_the_first_ones_values(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """Some files ran with the default range (none recorded), on another pool, by another
+    version: each fact names every value with its files, never only the first file's."""
+    tree = tmp_path / "tree"
+    paths = result_tree.write_tree(tree, 6, 1, pool=range(1, 4))
+    for number, path in enumerate(paths[:2]):
+        data = path.read_text(encoding="utf-8")
+        data = re.sub(r'\s*<property name="ros_discovery_range" value="[^"]*"/>', "", data)
+        data = data.replace('value="1-3"', 'value="50-52"')
+        if number == 0:
+            data = re.sub(r'(name="runner_version" value=")[^"]*', r"\g<1>0.0.9", data)
+        path.write_text(data, encoding="utf-8")
+    page = report_page(env, tmp_path / "page.html", tree)
+    assert _fact(page, "discovery-range") == (
+        "true",
+        "differs between files: LOCALHOST (4 file(s)); not recorded (isolation off) (2 file(s))",
+    )
+    assert _fact(page, "domain-pool") == (
+        "true",
+        "differs between files: 1-3 (4 file(s)); 50-52 (2 file(s))",
+    )
+    differs, said = _fact(page, "runner-version")
+    assert differs == "true" and "0.0.9 (1 file(s))" in said and "(5 file(s))" in said
+    # The control: files that agree show their one value, with no counts.
+    same = tmp_path / "same"
+    result_tree.write_tree(same, 6, 1, pool=range(1, 4))
+    page = report_page(env, tmp_path / "same.html", same)
+    assert _fact(page, "discovery-range") == ("false", "LOCALHOST")
+    assert _fact(page, "domain-pool") == ("false", "1-3")

@@ -146,3 +146,27 @@ def test_memory_stays_bounded_as_the_tree_grows(env: dict[str, str], tmp_path: P
     (small_rss, small_page), (big_rss, big_page) = peaks[150], peaks[1500]
     assert big_page > 8 * small_page  # the control: ten times the content was written
     assert big_rss < small_rss + 16 * 1024 * 1024, peaks
+
+
+def test_memory_stays_bounded_however_many_cases_fail(env: dict[str, str], tmp_path: Path) -> None:
+    """Ten times the failures, each with 60 KB of message, text and output: the page, the
+    text and the JSON grow ten times, the memory of writing them does not (issue 35, 3)."""
+    peaks: dict[int, dict[str, tuple[int, int]]] = {}
+    for files in (100, 1000):
+        tree = tmp_path / f"tree{files}"
+        result_tree.write_failing_tree(tree, files)
+        page, printed = tmp_path / f"page{files}.html", tmp_path / f"out{files}.txt"
+        peaks[files] = {}
+        for label, args in (
+            ("page", ["--html", str(page)]),
+            ("json", ["--json"]),
+            ("text", ["-v"]),
+        ):
+            peak = measure([CLI, "report", *args, str(tree)], env=env, stdout=printed)
+            assert peak.returncode == 1 and not peak.timed_out
+            written = page.stat().st_size if label == "page" else printed.stat().st_size
+            peaks[files][label] = (peak.max_rss, written)
+    for label in ("page", "json", "text"):
+        (small_rss, small_out), (big_rss, big_out) = peaks[100][label], peaks[1000][label]
+        assert big_out > 8 * small_out, label  # the control: ten times the failures written
+        assert big_rss < small_rss + 16 * 1024 * 1024, (label, peaks)
