@@ -30,11 +30,12 @@ FACT_VALUES = 12
 #: Values that could not be drawn, named on the page; more are counted.
 ODD_VALUES = 20
 #: The facts of the run, as the header's table names them, the property of each (the
-#: host is the file's ``hostname``), and what a file of ours that lacks it means.
-FACTS = (
+#: host is the file's ``hostname``), and what a file of ours that lacks it means (None:
+#: nothing that differs; the capacity is recorded only by tests that asked for resources).
+FACTS: tuple[tuple[str, str | None, str | None], ...] = (
     ("host", None, "not recorded"),
     ("domain pool", DOMAIN_POOL, "no ID held"),
-    ("capacity", "capacity", "no resources asked for"),
+    ("capacity", "capacity", None),
     ("discovery range", "ros_discovery_range", "not recorded (isolation off)"),
     ("runner version", "runner_version", "not recorded"),
 )
@@ -198,15 +199,16 @@ def _facts_html(page: Page) -> str:
     return f"<h2>Run</h2><table class=facts>{''.join(rows)}</table>"
 
 
-def _fact_cell(page: Page, fact: str, absent: str) -> str:
+def _fact_cell(page: Page, fact: str, absent: str | None) -> str:
     """A fact's values, each with its files when the files differ, and who did not say."""
     values, missing, more = page.facts[fact], page.absent[fact], page.more[fact]
+    missing = missing if absent is not None else 0
     differs = len(values) + bool(missing) + bool(more) > 1
     said = [
         text(value, 256) + (f" ({count} file(s))" if differs else "")
         for value, count in sorted(values.items())
     ]
-    if missing:
+    if missing and absent is not None:
         said.append(
             f"<span class=none>{escape(absent)}</span>"
             + (f" ({missing} file(s))" if differs else "")
