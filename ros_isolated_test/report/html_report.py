@@ -38,6 +38,7 @@ from ros_isolated_test.report.bounded_values import Reading, drawable
 from ros_isolated_test.report.counts import FileReport, listed_as_flaky
 from ros_isolated_test.report.html_page import FACTS, Page, assemble
 from ros_isolated_test.report.html_parts import text, write_case, write_suite
+from ros_isolated_test.report.html_timeline import BAR_TEXT
 from ros_isolated_test.report.tree import FileRead, read_tree
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import raw
@@ -147,7 +148,8 @@ def _add(page: Page, item: FileRead, number: int) -> None:
     offset = page.rest.size
     write_suite(page.rest, f"s{number}", test, _shown_path(item.path), report, cases)
     listed = len(failed) + len(flaky)
-    page.blocks.append((package, test, number, offset, page.rest.size - offset, len(cases), listed))
+    block = (package[:BAR_TEXT], test[:BAR_TEXT], number, offset, page.rest.size - offset)
+    page.blocks.append((*block, len(cases), listed))
 
 
 def _package_of(path: Path, test: str, ours: bool) -> str:

@@ -22,6 +22,9 @@ from ros_isolated_test.xunit.timeline import ENDED_AT, STARTED_AT, WAIT_DOMAIN, 
 
 #: The highest domain ID drawn as one (ROS 2 allows up to 232 on Linux).
 MAX_DOMAIN_ID = 232
+#: Characters a bar keeps of its test's name, host and resources: the page shows fewer,
+#: and a bar is kept for every attempt until the page is put together.
+BAR_TEXT = 512
 
 
 class Bar:
@@ -57,8 +60,8 @@ class Bar:
         wait_resources: float = 0.0,
         resources: str = "",
     ) -> None:
-        self.test = test
-        self.host = host
+        self.test = test[:BAR_TEXT]
+        self.host = host[:BAR_TEXT]
         #: The ID as the result says it ("17"); "" when the test had none of ours.
         self.domain = domain
         self.start = start
@@ -72,7 +75,7 @@ class Bar:
         self.attempts = attempts
         self.wait_domain = wait_domain
         self.wait_resources = wait_resources
-        self.resources = resources
+        self.resources = resources[:BAR_TEXT]
 
 
 def bars_of(
