@@ -77,6 +77,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "preset": preset.run,
     "cpu_load": cpu_load.run,
     "html_report": html_report.run,
+    "html_failures": html_report.run_failures,
     "imports": import_costs.run,
     "namespace": namespace_mode.run,
     "shard_cost": shard_cost.run,

@@ -29,7 +29,7 @@ from ros_isolated_test.runner.settings import (
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from ros_isolated_test.xunit.report import FileReport
+    from ros_isolated_test.report.text_report import TextReport
 
 EXIT_CODES_HELP = """\b
 Exit codes:
@@ -405,7 +405,7 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool, html_file: Pat
     offline: totals, failures first, flaky cases, every case by package and suite, and
     a timeline of every attempt on its domain ID (exit 2 when FILE cannot be written).
     """
-    from ros_isolated_test.xunit import report as reporting
+    from ros_isolated_test.report import text_report, tree
 
     if not paths:
         default = Path("build")
@@ -414,23 +414,25 @@ def report(paths: tuple[Path, ...], verbose: bool, as_json: bool, html_file: Pat
         paths = (default,)
     # A folder it cannot read is an error; a flaky case (passed after failing) is listed
     # apart and never fails the report, one that failed and was then not run always does.
-    reports = reporting.reports(paths) if html_file is None else _html_report(paths, html_file)
-    if as_json:
-        click.echo(reporting.as_json(reports))
-    else:
-        click.echo(reporting.text(reports, verbose), nl=False)
-    totals = reporting.totals(reports)
-    if totals["errors"] or totals["failures"]:
+    # Each file is read once (for the page too) and only its counts are kept.
+    with text_report.TextReport(verbose, as_json) as printed:
+        if html_file is None:
+            for item in tree.read_tree(paths):
+                printed.add(item)
+        else:
+            _html_report(paths, html_file, printed)
+        printed.write(lambda piece: click.echo(piece, nl=False))
+    if printed.total.failed:
         sys.exit(1)
 
 
-def _html_report(paths: tuple[Path, ...], destination: Path) -> list[FileReport]:
+def _html_report(paths: tuple[Path, ...], destination: Path, printed: TextReport) -> None:
     """Write the page (read once, for it and the text); a page that cannot be written: exit 2."""
     from ros_isolated_test import atomic_file
-    from ros_isolated_test.xunit import html_report
+    from ros_isolated_test.report import html_report
 
     try:
-        return html_report.write(paths, destination)
+        html_report.write(paths, destination, printed.add)
     except OSError as error:
         fix = "choose a writable file path"
         if isinstance(error, atomic_file.NotReplaceableError):

@@ -109,7 +109,7 @@ def tests_in(trees: tuple[Path, ...]) -> set[str]:
     from ros_isolated_test.text import display_text
     from ros_isolated_test.xunit import reader
     from ros_isolated_test.xunit.canonical import test_name_of
-    from ros_isolated_test.xunit.report import result_files
+    from ros_isolated_test.report.tree import result_files
 
     found: set[str] = set()
     for item in result_files(trees):

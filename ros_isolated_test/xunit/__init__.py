@@ -5,6 +5,6 @@
 ``normalise`` (per-producer fixes), ``validate`` (render and check against ``schemas/junit.xsd``),
 ``serialise`` (the bytes, without lxml), ``attempts`` and ``gitlab`` (reruns merged,
 GitLab's rules), ``result_file`` (one test's file through its life, with ``placeholder``
-and ``timeline``), ``canonical`` (any file made canonical), ``report`` and ``html_*``
-(summaries of many files, and their page).
+and ``timeline``), ``canonical`` (any file made canonical). Many files (a tree, its
+counts, its page) are ``report``'s, the package above this one.
 """

@@ -1,8 +1,8 @@
 """The raw model: what one result file says, as its producer wrote it, before normalising.
 
 Apart from the reading so that each stage (the sanitiser, the builder) and every reader of
-a result (``normalise``, ``report``, ``html_report``) names these records without
-importing the reading itself.
+a result (``normalise``, ``report.tree``, ``report.html_report``) names these records
+without importing the reading itself.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The suite properties a result's timeline is drawn from: when each attempt ran, and its wait.
 
 Apart from the result file's life cycle because two sides share them: the runner
-records them for each attempt, and the report's page (``html_report``) reads them back
-from files gathered, perhaps, from several machines.
+records them for each attempt, and the report's page (``report.html_timeline``) reads
+them back from files gathered, perhaps, from several machines.
 """
 
 from __future__ import annotations

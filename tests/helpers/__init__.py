@@ -7,8 +7,9 @@ holds fixtures only. Each module's docstring says its job; by kind:
   cli_runs, partition_runs, reruns, pytest_sessions (real pytest sessions for the
   plugin), launch_runs and launch_files (launch files under pytest, colcon and ctest).
 - Reading what a run left: results, canonical, xunit (suites made in code, read back),
-  output_capture, report_page, consumers (how colcon, xunit-viewer, junitparser, GitLab
-  and Jenkins read a result file), jenkins_junit10.
+  output_capture, report_page and report_text (``report``'s page and lines), consumers
+  (how colcon, xunit-viewer, junitparser, GitLab and Jenkins read a result file),
+  jenkins_junit10.
 - IDs and the machine: domains (picking free IDs), busy_machine (the scene of other ROS
   work for a session), coordinator and holding (holding IDs in other processes),
   hostile_lock_dir, overlap, resource_probe, namespaces, tiny_disk, survivors,

@@ -38,3 +38,13 @@ def timeline_bars(page: html.HtmlElement) -> list[html.HtmlElement]:
 def timeline_rows(page: html.HtmlElement) -> list[html.HtmlElement]:
     """Every row (one per host and domain ID) of the page's timeline."""
     return list(page.xpath(f"//*[@id='timeline']//div[{with_class('trow')}]"))
+
+
+def page_totals(page: html.HtmlElement) -> dict[str, int]:
+    """The page's counts of cases (not of files or bars), by their names, as drawn."""
+    found = {}
+    for cell in page.xpath(f"//div[{with_class('totals')}]/div[{with_class('total')}]"):
+        name = "".join(cell.xpath("./text()")).strip().replace(",", "")
+        if name not in ("result files", "attempts drawn"):
+            found[name] = int(cell.findtext("b"))
+    return {name: value for name, value in found.items() if value}

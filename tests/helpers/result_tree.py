@@ -123,3 +123,37 @@ def _suite(
         hostname=host,
         properties={**properties, "domain_pool": id_ranges(pool)},
     )
+
+
+def write_failing_tree(root: Path, files: int, size: int = 20 * 1024) -> list[Path]:
+    """``files`` result files of ours, each one test of one failing case, shaped as a run
+    leaves them (``write_tree``'s layout and properties), whose message, text and output
+    are ``size`` characters each (60 KB a failure by default): every file fails."""
+    written: list[Path] = []
+    chance = random.Random(files)
+    for number in range(files):
+        package = f"pkg_{number % 20:03d}"
+        name = f"{package}.test_{number:05d}"
+        started = START + number * 0.5
+        words = "".join(chance.choice("abcdefghij ") for _ in range(64))
+        case = Case(
+            f"{name}.TestNode",
+            "test_case",
+            time=0.4,
+            outcome=Outcome.FAILURE,
+            message=(FAILURE + " " + words * (size // 64 + 1))[:size],
+            text=("Traceback (most recent call last):\n" + words * (size // 64 + 1))[:size],
+            system_out=("[talker] " + words * (size // 64 + 1))[:size],
+        )
+        properties = {
+            "ros_domain_id": str(1 + number % 8),
+            "ros_discovery_range": "LOCALHOST",
+            "exit": "exited with code 1",
+            **timeline_properties(started, started + 0.4, 0.0, 0.0, "1-8"),
+        }
+        suite = Suite(name, [case], 0.4, instant(started)[:19], "host", properties)
+        path = root / package / "test_results" / package / f"test_{number:05d}.xml"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(serialise.serialize(suite))
+        written.append(path)
+    return written

@@ -93,11 +93,14 @@ def test_every_test_a_page_names_as_proof_exists() -> None:
 
 
 def test_control_a_page_naming_a_test_that_is_gone_is_seen() -> None:
-    real = "`tests/unit/xunit/test_report.py::test_a_file_name_cannot_forge_a_line_of_the_report`"
+    real = (
+        "`tests/unit/report/test_text_report.py::"
+        "test_a_file_name_cannot_forge_a_line_of_the_report`"
+    )
     assert docs.missing_tests(real) == []
     planted = f"{real}, `::test_gone` and `tests/test_report.py`"
     assert docs.missing_tests(planted) == [
-        "tests/unit/xunit/test_report.py::test_gone",
+        "tests/unit/report/test_text_report.py::test_gone",
         "tests/test_report.py",
     ]
 

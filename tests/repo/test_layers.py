@@ -1,10 +1,13 @@
 """The package's imports: no circles, and none from a lower layer to a higher one.
 
 The layers, highest first (``LAYERS``): the entry points (the CLI; the pytest plugin
-with its launch cases), then ``runner``, then ``domain_coordinator``, then ``process``
-and ``xunit``, then ``shard`` (splitting tests over machines: all the above read it),
-then at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``
-and the package's own ``__init__`` (its version). A module imports within its own unit (a
+with its launch cases), then ``runner``, then ``report`` (a tree of result files
+counted, printed and drawn: it reads each file through ``xunit``, and sits below
+``runner`` so that a runner may read what a report wrote, such as measured durations),
+then ``domain_coordinator``, then ``process`` and ``xunit``, then ``shard`` (splitting
+tests over machines: all the above read it), then at the bottom ``schemas``, ``text``,
+``switches``, ``atomic_file`` and the package's own ``__init__`` (its version). A module
+imports within its own unit (a
 package, or the modules named together below) or from any lower layer, never from a
 higher one. Two units of one layer do not import each other: ``process`` and ``xunit``
 share no code (nor do the CLI and the plugin), so either can change without the other;
@@ -40,6 +43,7 @@ LAYERS = (
         "launch_verdicts": "pytest plugin",
     },
     {"runner": "runner"},
+    {"report": "report"},
     {"domain_coordinator": "domain_coordinator"},
     {"process": "process", "xunit": "xunit"},
     {"shard": "shard"},

@@ -9,19 +9,22 @@ rest of the page because this is the one part that reasons about time and placem
 
 from __future__ import annotations
 
-import datetime
 import math
 from collections.abc import Callable
 from html import escape
 
+from ros_isolated_test.report.bounded_values import LONGEST, Reading, local
+from ros_isolated_test.report.counts import FileReport
+from ros_isolated_test.report.html_parts import attr, text
 from ros_isolated_test.xunit import raw
 from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY
-from ros_isolated_test.xunit.html_parts import attr, local, text
-from ros_isolated_test.xunit.report import FileReport
 from ros_isolated_test.xunit.timeline import ENDED_AT, STARTED_AT, WAIT_DOMAIN, WAIT_RESOURCES
 
-#: Timestamps before this are a producer's placeholder (gtest writes 1970-01-01).
-_PLAUSIBLE = datetime.datetime(2000, 1, 1, tzinfo=datetime.timezone.utc).timestamp()
+#: The highest domain ID drawn as one (ROS 2 allows up to 232 on Linux).
+MAX_DOMAIN_ID = 232
+#: Characters a bar keeps of its test's name, host and resources: the page shows fewer,
+#: and a bar is kept for every attempt until the page is put together.
+BAR_TEXT = 512
 
 
 class Bar:
@@ -52,13 +55,13 @@ class Bar:
         state: str,
         target: str,
         attempt: int = 1,
-        attempts: int = 1,
+        attempts: int = 1,  # 0: unknown (the file's count could not be read)
         wait_domain: float = 0.0,
         wait_resources: float = 0.0,
         resources: str = "",
     ) -> None:
-        self.test = test
-        self.host = host
+        self.test = test[:BAR_TEXT]
+        self.host = host[:BAR_TEXT]
         #: The ID as the result says it ("17"); "" when the test had none of ours.
         self.domain = domain
         self.start = start
@@ -72,7 +75,7 @@ class Bar:
         self.attempts = attempts
         self.wait_domain = wait_domain
         self.wait_resources = wait_resources
-        self.resources = resources
+        self.resources = resources[:BAR_TEXT]
 
 
 def bars_of(
@@ -82,35 +85,36 @@ def bars_of(
     host: str,
     report: FileReport,
     target: str,
+    reading: Reading,
 ) -> list[Bar]:
-    """The file's attempts on the timeline: each one the runner recorded.
+    """The file's attempts on the timeline: each one the runner recorded and kept.
 
     A file that does not say (another producer's, an older runner's) gets one bar from
-    its own timestamp and time, when it has a plausible one.
+    its own timestamp and time, when it has a plausible one. Every value is read within
+    bounds (``reading``): one that cannot be drawn is named there, never computed with.
     """
     final = _final_state(properties.get("exit", ""), report)
     if STARTED_AT not in properties:
-        span = _producer_span(read)
+        span = _producer_span(read, reading)
         if span is None:
             return []
-        domain = _domain(properties, "")
+        domain = _domain(properties, "", reading)
         return [Bar(test, host, domain, span[0], span[1], final, target)]
-    total = _number(properties.get(ATTEMPTS_PROPERTY, "1"), 1)
+    said = properties.get(ATTEMPTS_PROPERTY, "").strip()
+    total = reading.count(ATTEMPTS_PROPERTY, said) if said else 1
+    # Only the attempts the file kept (a long series keeps the first and last few): the
+    # count is never looped over, so no value makes this take long.
+    earlier = _earlier_attempts(properties)
+    last = total if total is not None else max(earlier, default=0) + 1
     bars: list[Bar] = []
-    for attempt in range(1, total + 1):
-        prefix = "" if attempt == total else f"attempt_{attempt}."
-        if prefix and f"{prefix}{STARTED_AT}" not in properties:
-            continue  # not kept (a long series keeps the first and last few)
-
-        def value(name: str, prefix: str = prefix) -> str:
-            return properties.get(f"{prefix}{name}", properties.get(name, ""))
-
-        start = _instant(value(STARTED_AT))
-        if start is None:
+    for attempt in [number for number in earlier if number < last] + [last]:
+        prefix = "" if attempt == last else f"attempt_{attempt}."
+        bar = _bar(properties, prefix, reading)
+        if bar is None:
             continue
-        end = _instant(value(ENDED_AT)) or start
+        start, end, waits = bar
         if prefix:
-            failed = "timeout" if "timed out" in value("exit") else "failed"
+            failed = "timeout" if "timed out" in _value(properties, prefix, "exit") else "failed"
             state = failed if report.failed or failed == "timeout" else "flaky"
         else:
             state = final
@@ -118,19 +122,59 @@ def bars_of(
             Bar(
                 test,
                 host,
-                _domain(properties, prefix),
+                _domain(properties, prefix, reading),
                 start,
                 end,
                 state,
                 target,
                 attempt,
-                total,
-                _seconds(value(WAIT_DOMAIN)),
-                _seconds(value(WAIT_RESOURCES)),
-                value("resources"),
+                total or 0,
+                waits[0],
+                waits[1],
+                _value(properties, prefix, "resources"),
             )
         )
     return bars
+
+
+def _value(properties: dict[str, str], prefix: str, name: str) -> str:
+    """An attempt's property: its own (``attempt_<k>.<name>``), else the last attempt's."""
+    return properties.get(f"{prefix}{name}", properties.get(name, ""))
+
+
+def _earlier_attempts(properties: dict[str, str]) -> list[int]:
+    """The numbers ``k`` of the ``attempt_<k>.started_at`` the file holds, in order."""
+    found = set()
+    for key in properties:
+        if key.startswith("attempt_") and key.endswith(f".{STARTED_AT}"):
+            number = key[len("attempt_") : -len(STARTED_AT) - 1]
+            if number.isascii() and number.isdigit() and len(number) <= 4 and int(number) > 0:
+                found.add(int(number))
+    return sorted(found)
+
+
+def _bar(
+    properties: dict[str, str], prefix: str, reading: Reading
+) -> tuple[float, float, tuple[float, float]] | None:
+    """An attempt's start, end and waits (for an ID, for resources), each within bounds."""
+    start = reading.instant(f"{prefix}{STARTED_AT}", _value(properties, prefix, STARTED_AT))
+    if start is None:
+        return None
+    end = reading.instant(f"{prefix}{ENDED_AT}", _value(properties, prefix, ENDED_AT))
+    if end is None:
+        end = start
+    elif end < start or end - start > LONGEST:
+        reading.name(
+            f"{prefix}{ENDED_AT}",
+            _value(properties, prefix, ENDED_AT),
+            "before its start or over a week after it: drawn as no time",
+        )
+        end = start
+    waits = tuple(
+        reading.seconds(f"{prefix}{name}", _value(properties, prefix, name)) or 0.0
+        for name in (WAIT_DOMAIN, WAIT_RESOURCES)
+    )
+    return start, end, (waits[0], waits[1])
 
 
 def _final_state(exit_reason: str, report: FileReport) -> str:
@@ -143,50 +187,33 @@ def _final_state(exit_reason: str, report: FileReport) -> str:
     return "passed"
 
 
-def _domain(properties: dict[str, str], prefix: str) -> str:
+def _domain(properties: dict[str, str], prefix: str, reading: Reading) -> str:
     """The attempt's domain ID as a number's text; "" without one of ours (isolation off)."""
     if properties.get("isolation") == "disabled":
         return ""
-    value = properties.get(f"{prefix}ros_domain_id", properties.get("ros_domain_id", ""))
-    return value if value.isascii() and value.isdigit() else ""
+    value = _value(properties, prefix, "ros_domain_id")
+    if not value:
+        return ""
+    if value.isascii() and value.isdigit() and len(value) <= 3 and int(value) <= MAX_DOMAIN_ID:
+        return str(int(value))
+    reading.name(f"{prefix}ros_domain_id", value, f"not a domain ID (0 to {MAX_DOMAIN_ID})")
+    return ""
 
 
-def _producer_span(read: raw.ReadResult) -> tuple[float, float] | None:
-    """When a producer's own file says it ran: its earliest plausible timestamp and time."""
+def _producer_span(read: raw.ReadResult, reading: Reading) -> tuple[float, float] | None:
+    """When a producer's own file says it ran: its earliest drawable timestamp and time."""
     start: float | None = None
     end = 0.0
     for attrs in [suite.attrs for suite in read.suites] + [read.root_attrs]:
-        began = _instant(attrs.get("timestamp", ""))
-        if began is None or began < _PLAUSIBLE:
+        stamp = attrs.get("timestamp", "")
+        if stamp.startswith("1970-01-01"):
+            continue  # gtest's placeholder: no time said
+        began = reading.instant("timestamp", stamp)
+        if began is None:
             continue
         start = began if start is None else min(start, began)
-        end = max(end, began + _seconds(attrs.get("time", "")))
+        end = max(end, began + (reading.seconds("time", attrs.get("time", "")) or 0.0))
     return None if start is None else (start, max(end, start))
-
-
-def _instant(text: str) -> float | None:
-    """ISO 8601 as seconds since the epoch; a time without a zone is local time."""
-    text = text.strip()
-    if not text:
-        return None
-    if text.endswith(("Z", "z")):
-        text = text[:-1] + "+00:00"
-    try:
-        return datetime.datetime.fromisoformat(text).timestamp()
-    except (ValueError, OverflowError, OSError):
-        return None
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text.replace(",", ""))
-    except ValueError:
-        return 0.0
-    return value if math.isfinite(value) and value > 0 else 0.0
-
-
-def _number(text: str, default: int) -> int:
-    return int(text) if text.isascii() and text.isdigit() and int(text) > 0 else default
 
 
 def runs(bars: list[Bar]) -> str:
@@ -194,7 +221,7 @@ def runs(bars: list[Bar]) -> str:
     said = []
     for bar in bars:
         where = f" on ID {bar.domain}" if bar.domain else ""
-        which = f"attempt {bar.attempt} " if bar.attempts > 1 else ""
+        which = f"attempt {bar.attempt} " if bar.attempts != 1 else ""
         state = "failed" if bar.state == "flaky" else _STATE_WORDS.get(bar.state, bar.state)
         said.append(f"{which}{state}{where}, {bar.end - bar.start:.2f} s")
     return "".join(f"<br>{escape(line)}" for line in said)
@@ -213,10 +240,18 @@ _STATES = (
 
 def timeline_html(bars: list[Bar]) -> str:
     """The bars, one row per (host, domain ID), lanes only where bars overlap in a row."""
+    parts: list[str] = []
+    write_timeline(bars, parts.append)
+    return "".join(parts)
+
+
+def write_timeline(bars: list[Bar], put: Callable[[str], object]) -> None:
+    """:func:`timeline_html` written piece by piece: a page of many bars is never one string."""
     legend = "".join(f"<span><i class=k-{key}></i>{escape(text)}</span>" for key, text in _STATES)
     head = f"<h2>Timeline</h2><div class=legend>{legend}</div>"
     if not bars:
-        return head + "<p class=none>No result file says when it ran: nothing to draw.</p>"
+        put(head + "<p class=none>No result file says when it ran: nothing to draw.</p>")
+        return
     t0 = min(bar.start for bar in bars)
     low = min(bar.start - bar.wait_domain - bar.wait_resources for bar in bars)
     high = max(bar.end for bar in bars)
@@ -235,16 +270,16 @@ def timeline_html(bars: list[Bar]) -> str:
     def place(begin: float, end: float) -> str:
         return f"left:{pos(begin)};width:{(end - begin) / span * 100:.4f}%"
 
-    parts = [
-        head,
+    put(head)
+    put(
         f'<div id=timeline data-t0="{t0:.6f}" data-low="{low - t0:.6f}" '
-        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}"><div class=tgrid>',
-    ]
+        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}"><div class=tgrid>'
+    )
     for tick in _ticks(low - t0, high - t0):
         # A label at the right edge would be cut: its line alone says enough.
         label = _tick_label(tick) if (t0 + tick - low) / span < 0.95 else ""
-        parts.append(f'<div class=tick style="left:{pos(t0 + tick)}"><span>{label}</span></div>')
-    parts.append("</div><div class=taxis></div>")
+        put(f'<div class=tick style="left:{pos(t0 + tick)}"><span>{label}</span></div>')
+    put("</div><div class=taxis></div>")
     for (host, _, _), members in sorted(rows.items()):
         members.sort(key=lambda bar: (bar.start, bar.end))
         lanes: list[float] = []
@@ -262,16 +297,15 @@ def timeline_html(bars: list[Bar]) -> str:
             name = f"{host or '(host not recorded)'} · {name}"
         clash = " clash" if domain and len(lanes) > 1 else ""
         title = " (used by two tests at once)" if clash else ""
-        parts.append(
+        put(
             f'<div class="trow{clash}" data-row="{attr(name)}" data-host="{attr(host)}" '
             f'data-domain="{attr(domain)}"><div class=tlabel title="{attr(name + title)}">'
             f'{text(name, 128)}</div><div class=tlane style="--lanes:{len(lanes)}">'
         )
         for bar, lane in placed:
-            parts.append(_bar_html(bar, lane, t0, span, place))
-        parts.append("</div></div>")
-    parts.append(f"</div><p class=where>0 s = {escape(local(t0))}, the earliest start.</p>")
-    return "".join(parts)
+            put(_bar_html(bar, lane, t0, span, place))
+        put("</div></div>")
+    put(f"</div><p class=where>0 s = {escape(local(t0))}, the earliest start.</p>")
 
 
 def _bar_html(
@@ -294,13 +328,13 @@ def _bar_html(
             )
             begin += seconds
     short = bar.test.split(".", 1)[1] if "." in bar.test else bar.test
-    label = short if bar.attempts == 1 else f"{short} ({bar.attempt}/{bar.attempts})"
+    label = short if bar.attempts == 1 else f"{short} ({bar.attempt}/{_of(bar)})"
     # A bar too narrow for its name keeps it for tools and the hover card, not drawn.
     narrow = " narrow" if (bar.end - bar.start) / span < 0.03 else ""
     parts.append(
         f'<a class="bar {bar.state}{narrow}" href="#{bar.target}" {common} '
         f'data-start="{bar.start - t0:.6f}" data-end="{bar.end - t0:.6f}" '
-        f'data-state="{bar.state}" data-attempt="{bar.attempt}" data-attempts="{bar.attempts}" '
+        f'data-state="{bar.state}" data-attempt="{bar.attempt}" data-attempts="{_of(bar)}" '
         f'data-host="{attr(bar.host)}" data-resources="{attr(bar.resources)}" '
         f'data-wait-domain="{bar.wait_domain:.3f}" data-wait-resources="{bar.wait_resources:.3f}" '
         f'style="{place(bar.start, bar.end)};--lane:{lane}" title="{attr(card)}" '
@@ -321,7 +355,7 @@ _STATE_WORDS = {
 def _card(bar: Bar, t0: float) -> str:
     """What hovering a bar says: the test, the attempt, where, how long, what it held."""
     lines = [bar.test]
-    attempt = f"attempt {bar.attempt} of {bar.attempts}: " if bar.attempts > 1 else ""
+    attempt = f"attempt {bar.attempt} of {_of(bar)}: " if bar.attempts != 1 else ""
     lines.append(f"{attempt}{_STATE_WORDS.get(bar.state, bar.state)}")
     where = f"ROS_DOMAIN_ID {bar.domain}" if bar.domain else "no domain ID of ours"
     if bar.host:
@@ -334,6 +368,11 @@ def _card(bar: Bar, t0: float) -> str:
         )
     lines.append(f"held {bar.resources}" if bar.resources else "held no resources")
     return "\n".join(lines)
+
+
+def _of(bar: Bar) -> str:
+    """How many attempts the test had, as the page says it ("unknown": not readable)."""
+    return str(bar.attempts) if bar.attempts else "unknown"
 
 
 _CLOCK_STEPS = (60, 120, 300, 600, 900, 1800, 3600, 7200, 10800, 21600, 43200, 86400)

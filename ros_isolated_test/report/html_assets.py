@@ -36,6 +36,7 @@ table.facts{border-collapse:collapse;background:#fff}
 table.facts th,table.facts td{border:1px solid var(--line);padding:3px 8px;text-align:left;
 vertical-align:top}
 table.facts th{font-weight:600;background:#f3f3f3;white-space:nowrap}
+table.facts .differs{color:var(--flaky)}table.facts ul{margin:2px 0;padding-left:18px}
 .legend{display:flex;gap:14px;flex-wrap:wrap;font-size:12px;color:var(--muted);margin:4px 0 6px}
 .legend i{display:inline-block;width:14px;height:10px;margin-right:4px;vertical-align:-1px;
 border-radius:2px}

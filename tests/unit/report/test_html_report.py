@@ -1,4 +1,4 @@
-"""``xunit.html_report``: ``report --html`` writes one page for a tree, read here as HTML.
+"""``report.html_report``: ``report --html`` writes one page for a tree, read here as HTML.
 
 The writer reads each result file once, into the page, as ``report`` reads it, and
 returns each file's report for the text report and the exit code, which stay as they
@@ -22,27 +22,33 @@ from helpers.report_page import parsed
 from helpers.xunit import SAMPLES
 
 from ros_isolated_test.atomic_file import NotReplaceableError
-from ros_isolated_test.xunit import html_report, report, serialise
+from ros_isolated_test.report import html_report
+from ros_isolated_test.report.tree import read_tree
+from ros_isolated_test.xunit import serialise
 from ros_isolated_test.xunit.model import Case, Suite
 
 
-def test_the_page_replaces_its_destination_whole_and_gives_each_files_report(
+def test_the_page_replaces_its_destination_whole_and_hands_on_each_file_as_read(
     tmp_path: Path,
 ) -> None:
     tree = tmp_path / "tree"
-    result_tree.write_tree(tree, 6, 2)
+    result_tree.write_tree(tree, 60, 2)
     (tree / "Test.xml").write_text('<Site Name="vm"><Testing/></Site>')  # no result: skipped
     destination = tmp_path / "out" / "page.html"
     destination.parent.mkdir()
     destination.write_text("an old page")
-    reports = html_report.write([tree], destination)
-    expected = report.reports([tree])
-    assert [(item.path, item.tests, item.failures) for item in reports] == [
-        (item.path, item.tests, item.failures) for item in expected
-    ]
-    assert len(reports) == 6
+    handed: list[tuple[Path, int, int]] = []
+    total = html_report.write(
+        [tree],
+        destination,
+        lambda item: handed.append((item.path, item.report.tests, item.report.failures)),
+    )
+    expected = [(item.path, item.report.tests, item.report.failures) for item in read_tree([tree])]
+    assert handed == expected and len(handed) == 60
+    assert (total.tests, total.failures) == (120, sum(failures for _, _, failures in handed))
+    assert total.failures > 0  # the made-up tree has failures: they are counted
     page = parsed(destination.read_text(encoding="utf-8"))
-    assert len(page.xpath("//details[@class='suite']")) == 6
+    assert len(page.xpath("//details[@class='suite']")) == 60
     assert os.listdir(destination.parent) == ["page.html"]  # no temporary file left
     assert oct(destination.stat().st_mode & 0o777) == oct(0o644)
 
@@ -84,7 +90,7 @@ def test_a_destination_a_write_would_replace_is_refused_before_anything_is_read(
         html_report.write(paths(), tmp_path)
     assert read == [] and fifo.exists() and not fifo.is_file()
     # The null device discards the page; the files are read all the same (the control).
-    assert len(html_report.write(paths(), Path(os.devnull))) == 2
+    assert html_report.write(paths(), Path(os.devnull)).tests == 2
     assert read == [tree]
 
 
@@ -140,3 +146,27 @@ def test_memory_stays_bounded_as_the_tree_grows(env: dict[str, str], tmp_path: P
     (small_rss, small_page), (big_rss, big_page) = peaks[150], peaks[1500]
     assert big_page > 8 * small_page  # the control: ten times the content was written
     assert big_rss < small_rss + 16 * 1024 * 1024, peaks
+
+
+def test_memory_stays_bounded_however_many_cases_fail(env: dict[str, str], tmp_path: Path) -> None:
+    """Ten times the failures, each with 60 KB of message, text and output: the page, the
+    text and the JSON grow ten times, the memory of writing them does not (issue 35, 3)."""
+    peaks: dict[int, dict[str, tuple[int, int]]] = {}
+    for files in (100, 1000):
+        tree = tmp_path / f"tree{files}"
+        result_tree.write_failing_tree(tree, files)
+        page, printed = tmp_path / f"page{files}.html", tmp_path / f"out{files}.txt"
+        peaks[files] = {}
+        for label, args in (
+            ("page", ["--html", str(page)]),
+            ("json", ["--json"]),
+            ("text", ["-v"]),
+        ):
+            peak = measure([CLI, "report", *args, str(tree)], env=env, stdout=printed)
+            assert peak.returncode == 1 and not peak.timed_out
+            written = page.stat().st_size if label == "page" else printed.stat().st_size
+            peaks[files][label] = (peak.max_rss, written)
+    for label in ("page", "json", "text"):
+        (small_rss, small_out), (big_rss, big_out) = peaks[100][label], peaks[1000][label]
+        assert big_out > 8 * small_out, label  # the control: ten times the failures written
+        assert big_rss < small_rss + 16 * 1024 * 1024, (label, peaks)

@@ -1,34 +1,41 @@
 """The report page's small pieces: text as the page shows it, and each file's case blocks.
 
 Every part of the page clips and escapes its text the same way (:func:`text`,
-:func:`attr`) and gives times in local time (:func:`local`). The blocks of failed, flaky
-and other cases are written into spools (:class:`Spool`, temporary files) as each result
-file is read, so the page needs bounded memory however many cases there are; the
+:func:`attr`), direction controls shown. The blocks of failed, flaky and other cases are
+written into spools (``spool``, temporary files) as each result file is read, so the
+page needs bounded memory however many cases there are and however many fail; the
 timeline (``html_timeline``) and the page around them (``html_page``) are apart.
 """
 
 from __future__ import annotations
 
-import datetime
-import os
-import tempfile
 from html import escape
-from typing import IO
 
-from ros_isolated_test.text import shown
-from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
+from ros_isolated_test.report.bounded_values import seconds_shown
+from ros_isolated_test.report.counts import FileReport, listed_as_flaky, not_run_again
+from ros_isolated_test.report.spool import Spool
+from ros_isolated_test.text import shown, shown_code
 from ros_isolated_test.xunit.model import Case, Outcome
-from ros_isolated_test.xunit.report import FileReport
 
+#: The characters that set the direction of the text after them, shown as their code:
+#: embeddings and overrides (U+202A-U+202E), isolates (U+2066-U+2069) and the marks
+#: (U+200E, U+200F, U+061C). Drawn raw, one could make a test's name read as another's.
+_DIRECTION_CONTROLS = {
+    code: shown_code(code)
+    for code in (*range(0x202A, 0x202F), *range(0x2066, 0x206A), 0x200E, 0x200F, 0x061C)
+}
 #: Characters of a message, a failure's text and an output tail shown per case.
 MESSAGE_CHARS = 8 * 1024
 TAIL_CHARS = 4 * 1024
-_COPY_CHUNK = 1 << 20
 
 
 def text(value: str, limit: int, tail: bool = False) -> str:
-    """``value`` cut to ``limit`` characters (its head, or its tail), escaped for HTML."""
-    value = shown(value)
+    r"""``value`` cut to ``limit`` characters (its head, or its tail), escaped for HTML.
+
+    Direction controls are shown as their code (``\u202e``), as the text report shows
+    them: a name that reverses itself ("\u202egnissap\u202c") never reads as another.
+    """
+    value = shown(value).translate(_DIRECTION_CONTROLS)
     if len(value) > limit:
         cut = len(value) - limit
         if tail:
@@ -39,40 +46,8 @@ def text(value: str, limit: int, tail: bool = False) -> str:
 
 
 def attr(value: str) -> str:
-    return escape(shown(value), quote=True)
-
-
-def local(when: float) -> str:
-    return datetime.datetime.fromtimestamp(when).astimezone().isoformat(timespec="seconds")
-
-
-class Spool:
-    """A temporary file written as UTF-8 that knows its length: a part of the page."""
-
-    def __init__(self) -> None:
-        self.file: IO[bytes] = tempfile.TemporaryFile()  # noqa: SIM115 (closed by Page.close)
-        self.size = 0
-
-    def write(self, text: str) -> None:
-        data = text.encode("utf-8", "backslashreplace")
-        self.file.write(data)
-        self.size += len(data)
-
-    def copy_to(self, out: IO[bytes], offset: int = 0, length: int | None = None) -> None:
-        """Bytes ``offset`` to ``offset + length`` (default: to the end) into ``out``."""
-        self.file.flush()
-        self.file.seek(offset)
-        left = self.size - offset if length is None else length
-        while left > 0:
-            chunk = self.file.read(min(left, _COPY_CHUNK))
-            if not chunk:
-                break
-            out.write(chunk)
-            left -= len(chunk)
-        self.file.seek(0, os.SEEK_END)
-
-    def close(self) -> None:
-        self.file.close()
+    """``value`` as an attribute's text, escaped, its direction controls shown."""
+    return escape(shown(value).translate(_DIRECTION_CONTROLS), quote=True)
 
 
 def write_case(
@@ -81,8 +56,9 @@ def write_case(
     """A failed or flaky case: its message first, its text, the tail of its output."""
     flaky = not case.outcome.failed
     if flaky:
-        tag, kind = "flaky", "flaky"
-    elif case.type == NOT_RUN_AGAIN_TYPE:
+        tag = "flaky"
+        kind = "flaky" if case.outcome is Outcome.PASSED else "skipped after failing"
+    elif not_run_again(case):
         tag, kind = "failure", "failed, then not run"
     else:
         tag, kind = case.outcome.value, case.outcome.value
@@ -135,8 +111,7 @@ def write_suite(
     spool: Spool, anchor: str, test: str, where: str, report: FileReport, cases: list[Case]
 ) -> None:
     """A suite's block: its counts, then every case not listed above, by class."""
-    listed = len(report.failed_cases) + len(report.flaky_cases)
-    said = [f"{report.tests} test(s)", f"{report.tests - listed - report.skipped} passed"]
+    said = [f"{report.tests} test(s)", f"{report.passed} passed"]
     if report.skipped:
         said.append(f"{report.skipped} skipped")
     if report.failed:
@@ -148,7 +123,7 @@ def write_suite(
         f"<b>{text(test, 512)}</b><span class=counts>{', '.join(said)} · {where}</span>"
         "</summary>"
     )
-    rest = [case for case in cases if not case.outcome.failed and not case.flaky]
+    rest = [case for case in cases if not case.outcome.failed and not listed_as_flaky(case)]
     if not rest:
         spool.write("<p class=none>every case is listed above</p></details>")
         return
@@ -169,6 +144,6 @@ def write_suite(
             note = f": {text(case.message.splitlines()[0] if case.message else '', 200)}"
         spool.write(
             f'<tr class="c {outcome}"><td>{text(case.name, 512)}</td>'
-            f"<td>{case.time:.3f} s</td><td class=o>{outcome}{note}</td></tr>"
+            f"<td>{seconds_shown(case.time)}</td><td class=o>{outcome}{note}</td></tr>"
         )
     spool.write("</tbody></table></details>")

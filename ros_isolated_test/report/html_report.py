@@ -9,15 +9,18 @@ the run's facts; below it failures and errors first with their message and outpu
 tail, then flaky cases with each attempt, then everything else by package and suite.
 
 Self-contained (inline style and script, a policy that forbids any request), so it
-works as a CI artifact opened offline. Written as a stream in bounded memory: each
-file's cases go straight into one of three spools and are forgotten; only counts, a
-few distinct facts and one small record per attempt are kept. The page is then put
-together from the spools, so the totals come first although they are known last.
+works as a CI artifact opened offline. Written as a stream in bounded memory, however
+many cases there are and however many fail: each file's cases go straight into one of
+three spools and are forgotten; only counts, a few distinct facts and one small record
+per attempt are kept. The page is then put together from the spools, so the totals
+come first although they are known last. Every value drawn is read within bounds
+(``bounded_values``): an odd one is named on the page, never a crash or a hang.
 
 The page is made in four modules: this one reads each file into the page (``write``,
 the flow), ``html_timeline`` turns attempts into bars and draws them, ``html_parts``
 writes each case and suite into the spools, ``html_page`` keeps the page's state and
-puts it together; ``html_assets`` is the inline style and script.
+puts it together; ``html_assets`` is the inline style and script. The printed report
+is made from the same reading (``write``'s ``each``): every file is read once.
 """
 
 from __future__ import annotations
@@ -25,26 +28,33 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
 from ros_isolated_test.atomic_file import NotReplaceableError, discards, special_kind
+from ros_isolated_test.report import html_timeline
+from ros_isolated_test.report.bounded_values import Reading, drawable
+from ros_isolated_test.report.counts import FileReport, listed_as_flaky
+from ros_isolated_test.report.html_page import FACTS, Page, assemble
+from ros_isolated_test.report.html_parts import text, write_case, write_suite
+from ros_isolated_test.report.html_timeline import BAR_TEXT
+from ros_isolated_test.report.tree import FileRead, read_tree
 from ros_isolated_test.text import shown
-from ros_isolated_test.xunit import html_timeline, normalise, raw, reader
+from ros_isolated_test.xunit import raw
 from ros_isolated_test.xunit.canonical import test_name_of
-from ros_isolated_test.xunit.html_page import FACTS, Page, assemble
-from ros_isolated_test.xunit.html_parts import text, write_case, write_suite
-from ros_isolated_test.xunit.report import FileReport, counted, result_files, unreadable_folder
 
 
-def write(paths: Iterable[Path], destination: Path) -> list[FileReport]:
+def write(
+    paths: Iterable[Path], destination: Path, each: Callable[[FileRead], object] | None = None
+) -> FileReport:
     """Write the page for every result file under ``paths`` to ``destination``.
 
-    Returns each file's report, as :func:`report.reports` gives them, for the text
-    report and the exit code. ``destination`` is replaced whole in one rename (a
-    reader never sees half a page); the null device discards it; a device node, FIFO
-    or socket is never replaced (:class:`NotReplaceableError`, before anything is read).
+    Each file, once read into the page, is handed to ``each`` (the printed report) and
+    forgotten; returns the counts of them all. ``destination`` is replaced whole in one
+    rename (a reader never sees half a page); the null device discards it; a device
+    node, FIFO or socket is never replaced (:class:`NotReplaceableError`, before
+    anything is read).
     """
     discard = discards(destination)
     kind = None if discard else special_kind(destination)
@@ -54,18 +64,16 @@ def write(paths: Iterable[Path], destination: Path) -> list[FileReport]:
         raise IsADirectoryError(21, "it is a directory", str(destination))
     page = Page()
     try:
-        for number, item in enumerate(result_files(paths), start=1):
-            if isinstance(item, OSError):
-                _add_unreadable(page, unreadable_folder(item), number)
-            else:
-                _add_file(page, item, number)
-        if discard:
-            return page.reports
-        with _replacing(destination) as out:
-            assemble(page, out)
+        for number, item in enumerate(read_tree(paths), start=1):
+            _add(page, item, number)
+            if each is not None:
+                each(item)
+        if not discard:
+            with _replacing(destination) as out:
+                assemble(page, out)
     finally:
         page.close()
-    return page.reports
+    return page.total
 
 
 @contextlib.contextmanager
@@ -93,48 +101,55 @@ def _replacing(destination: Path) -> Iterator[IO[bytes]]:
 # -- reading ---------------------------------------------------------------------------
 
 
-def _add_unreadable(page: Page, report: FileReport, number: int) -> None:
-    page.reports.append(report)
-    where = _shown_path(report.path)
-    for index, case in enumerate(report.failed_cases, start=1):
-        write_case(page.failures, case, f"f{number}-{index}", where, where, "")
-
-
-def _add_file(page: Page, path: Path, number: int) -> None:
+def _add(page: Page, item: FileRead, number: int) -> None:
     """Read one result file into the page: its cases into the spools, its bars kept."""
-    read = reader.read(path)
-    if read.root_tag is not None and not read.is_xunit:
-        return  # XML that is no test result (a ctest Test.xml), as ``report`` skips it
-    cases = normalise.cases_from(read, None, test_name_of(path))
-    report = counted(path, cases)
-    page.reports.append(report)
+    report, cases, read = item.report, item.cases, item.read
+    page.total.include(report)
+    where = _shown_path(item.path)
+    if read is None:  # a folder that could not be read: its one error case
+        for index, case in enumerate(cases, start=1):
+            write_case(page.failures, case, f"f{number}-{index}", where, where, "")
+        return
     page.files += 1
     suite = read.suites[0] if read.suites else None
     properties = suite.properties if suite is not None else {}
     ours = "runner_version" in properties and len(read.suites) == 1
     page.foreign += not ours
-    test = suite.name if ours and suite is not None and suite.name else test_name_of(path)
-    package = _package_of(path, test, ours)
+    test = suite.name if ours and suite is not None and suite.name else test_name_of(item.path)
+    package = _package_of(item.path, test, ours)
     host = _host_of(read)
-    page.note("host", host or "(not recorded)")
-    for fact, name in FACTS[1:]:
-        if name is not None and properties.get(name):
-            page.note(fact, properties[name])
+    page.note("host", host)
+    if ours:  # other producers record none of these: they are counted apart
+        for fact, name, _ in FACTS[1:]:
+            page.note(fact, properties.get(name or "", ""))
+    failed = [case for case in cases if case.outcome.failed]
+    flaky = [case for case in cases if listed_as_flaky(case)]
     # A click on the test's bar leads to its first failure, else its first flaky case.
-    target = f"f{number}-1" if report.failed_cases else f"k{number}-1" if report.flaky else ""
-    bars = html_timeline.bars_of(properties, read, test, host, report, target or f"s{number}")
+    target = f"f{number}-1" if failed else f"k{number}-1" if flaky else f"s{number}"
+    reading = Reading()
+    bars = html_timeline.bars_of(properties, read, test, host, report, target, reading)
+    long = [case for case in cases if not drawable(case.time)]
+    if long:
+        first = long[0]
+        reading.name(
+            f"time of {len(long)} case(s), the first {first.classname} {first.name}",
+            f"{first.time:g}",
+            "over a week: shown as unknown (a time in milliseconds?)",
+        )
+    page.name_odd(where, reading.odd)
     page.attempts += len(bars)
     page.bars.extend(bars)
-    where = f"{_shown_path(path)}{html_timeline.runs(bars)}"
+    where += html_timeline.runs(bars)
     output = suite.system_out if suite is not None else ""
-    for index, case in enumerate(report.failed_cases, start=1):
+    for index, case in enumerate(failed, start=1):
         write_case(page.failures, case, f"f{number}-{index}", test, where, output)
-    for index, case in enumerate(report.flaky_cases, start=1):
+    for index, case in enumerate(flaky, start=1):
         write_case(page.flaky, case, f"k{number}-{index}", test, where, output)
-    listed = len(report.failed_cases) + len(report.flaky_cases)
     offset = page.rest.size
-    write_suite(page.rest, f"s{number}", test, _shown_path(path), report, cases)
-    page.blocks.append((package, test, number, offset, page.rest.size - offset, len(cases), listed))
+    write_suite(page.rest, f"s{number}", test, _shown_path(item.path), report, cases)
+    listed = len(failed) + len(flaky)
+    block = (package[:BAR_TEXT], test[:BAR_TEXT], number, offset, page.rest.size - offset)
+    page.blocks.append((*block, len(cases), listed))
 
 
 def _package_of(path: Path, test: str, ours: bool) -> str:

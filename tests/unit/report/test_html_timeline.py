@@ -1,4 +1,4 @@
-"""``xunit.html_timeline``: one bar per attempt, where and when it ran, on a time axis.
+"""``report.html_timeline``: one bar per attempt, where and when it ran, on a time axis.
 
 Bars come from what the runner records in each result file (an earlier attempt's from
 its own ``attempt_<k>.`` properties) or from another producer's own timestamp when it
@@ -21,10 +21,11 @@ from helpers.report_page import parsed, report_page, timeline_bars, timeline_row
 from helpers.results import load_result
 from helpers.xunit import SAMPLES
 
-from ros_isolated_test.xunit.html_timeline import Bar, bars_of, runs, timeline_html
+from ros_isolated_test.report.bounded_values import Reading
+from ros_isolated_test.report.counts import counted
+from ros_isolated_test.report.html_timeline import Bar, bars_of, runs, timeline_html
 from ros_isolated_test.xunit.model import Case, Outcome
 from ros_isolated_test.xunit.raw import RawSuite, ReadResult
-from ros_isolated_test.xunit.report import counted
 from ros_isolated_test.xunit.timeline import timeline_properties
 
 START = 1_790_000_000.0
@@ -43,7 +44,7 @@ def _recorded(attempt: int, start: float, domain: str) -> dict[str, str]:
 def test_each_attempt_kept_is_a_bar_and_an_earlier_failed_one_is_flaky() -> None:
     properties = {**_recorded(1, START, "1"), **_recorded(0, START + 10, "3"), "attempts": "3"}
     read = ReadResult(Path("t.xml"))
-    bars = bars_of(properties, read, "pkg.t", "h", PASSED, "s1")
+    bars = bars_of(properties, read, "pkg.t", "h", PASSED, "s1", Reading())
     # Attempt 2 was not kept (a long series keeps the first and last few): no bar.
     assert [(bar.attempt, bar.attempts, bar.domain, bar.state) for bar in bars] == [
         (1, 3, "1", "flaky"),
@@ -51,9 +52,11 @@ def test_each_attempt_kept_is_a_bar_and_an_earlier_failed_one_is_flaky() -> None
     ]
     assert [(bar.start, bar.end) for bar in bars] == [(START, START + 2), (START + 10, START + 12)]
     assert (bars[0].wait_domain, bars[0].wait_resources) == (1.0, 0.5)
-    failing = bars_of(properties, read, "pkg.t", "h", FAILED, "f1-1")
+    failing = bars_of(properties, read, "pkg.t", "h", FAILED, "f1-1", Reading())
     assert [bar.state for bar in failing] == ["failed", "failed"]  # no later pass: no flake
-    off = bars_of({**properties, "isolation": "disabled"}, read, "pkg.t", "h", PASSED, "s1")
+    off = bars_of(
+        {**properties, "isolation": "disabled"}, read, "pkg.t", "h", PASSED, "s1", Reading()
+    )
     assert [bar.domain for bar in off] == ["", ""]  # no ID of ours
 
 
@@ -63,12 +66,12 @@ def test_another_producers_file_is_drawn_from_its_own_plausible_timestamp() -> N
         RawSuite("placeholder", {"timestamp": "1970-01-01T00:00:00", "time": "5"}),
         RawSuite("real", {"timestamp": "2026-11-21T22:41:26Z", "time": "1,002.5"}),
     ]
-    [bar] = bars_of({}, read, "gtest", "", FAILED, "f1-1")
+    [bar] = bars_of({}, read, "gtest", "", FAILED, "f1-1", Reading())
     start = datetime.datetime(2026, 11, 21, 22, 41, 26, tzinfo=datetime.timezone.utc)
     assert (bar.start, bar.end - bar.start) == (start.timestamp(), 1002.5)
     assert (bar.state, bar.domain) == ("failed", "")
     read.suites = read.suites[:1]  # the control: a 1970 placeholder alone is no time at all
-    assert bars_of({}, read, "gtest", "", FAILED, "f1-1") == []
+    assert bars_of({}, read, "gtest", "", FAILED, "f1-1", Reading()) == []
 
 
 def test_an_axis_has_round_ticks_and_the_bars_their_lanes() -> None:

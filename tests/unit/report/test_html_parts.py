@@ -1,4 +1,4 @@
-"""``xunit.html_parts``: the page's small pieces, text as the page shows it and each case's block.
+"""``report.html_parts``: the page's small pieces, text as the page shows it and each case's block.
 
 Every part clips and escapes its text the same way, so a name or message is always
 text and never markup; the blocks of failed, flaky and other cases go to spools
@@ -11,14 +11,19 @@ import io
 from collections.abc import Callable
 from pathlib import Path
 
+from helpers import capabilities, chromium
 from helpers.chromium import with_class as cls
-from helpers.report_page import parsed, report_page
+from helpers.commands import run_cli
+from helpers.report_page import parsed, report_page, timeline_bars
 from lxml import html
 
+from ros_isolated_test.report.counts import counted
+from ros_isolated_test.report.html_parts import attr, text, write_case, write_suite
+from ros_isolated_test.report.spool import Spool
+from ros_isolated_test.xunit import serialise
 from ros_isolated_test.xunit.attempts import NOT_RUN_AGAIN_TYPE
-from ros_isolated_test.xunit.html_parts import Spool, attr, text, write_case, write_suite
-from ros_isolated_test.xunit.model import Attempt, Case, Outcome
-from ros_isolated_test.xunit.report import counted
+from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
+from ros_isolated_test.xunit.timeline import timeline_properties
 
 
 def _written(write: Callable[[Spool], None]) -> html.HtmlElement:
@@ -43,24 +48,6 @@ def test_text_is_cut_to_its_head_or_tail_and_escaped() -> None:
     assert text("caf\udce9 \ud800", 100) == "caf\\xe9 \\ud800"
     assert text("short", 5) == "short"  # the control: at the limit, nothing is cut
     assert attr('say "<hi>"') == "say &quot;&lt;hi&gt;&quot;"
-
-
-def test_a_spool_copies_any_part_of_what_was_written() -> None:
-    spool = Spool()
-    try:
-        spool.write("héllo ")
-        spool.write("world")
-        assert spool.size == len("héllo world".encode())
-        whole, part = io.BytesIO(), io.BytesIO()
-        spool.copy_to(whole)
-        spool.copy_to(part, offset=len("héllo ".encode()), length=3)
-        assert (whole.getvalue().decode(), part.getvalue()) == ("héllo world", b"wor")
-        spool.write("!")  # after a copy, writing goes on at the end
-        again = io.BytesIO()
-        spool.copy_to(again)
-        assert again.getvalue().decode() == "héllo world!"
-    finally:
-        spool.close()
 
 
 def test_a_failed_case_shows_its_message_its_text_and_the_tail_of_its_output() -> None:
@@ -124,3 +111,50 @@ def test_names_and_messages_are_text_never_markup(env: dict[str, str], tmp_path:
     assert page.xpath("//img") == []
     (case,) = page.xpath(f"//article[{cls('case')}]")
     assert hostile in case.text_content()  # shown, as text
+
+
+# --- direction controls: a name cannot read as another (issue 35, item 4) ----------------------
+
+#: Reads "passing ok" when drawn raw: the override reverses "gnissap".
+SPOOFED = "\u202egnissap\u202c ok"
+#: Every direction control: embeddings, overrides, isolates and the marks.
+DIRECTION_CONTROLS = "\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069\u200e\u200f\u061c"
+
+
+def test_direction_controls_are_shown_as_their_code_in_text_and_attributes() -> None:
+    assert text(SPOOFED, 100) == "\\u202egnissap\\u202c ok"
+    assert attr(SPOOFED) == "\\u202egnissap\\u202c ok"
+    shown = text(DIRECTION_CONTROLS, 1000)
+    assert not set(shown) & set(DIRECTION_CONTROLS)
+    assert shown.count("\\u") == len(DIRECTION_CONTROLS)
+    # The control: right-to-left text itself (Hebrew, Arabic) is shown as it is.
+    assert text("שלום مرحبا", 100) == "שלום مرحبا"
+
+
+@capabilities.CHROMIUM.mark
+def test_a_name_that_reverses_itself_is_drawn_with_its_controls_shown_in_chromium(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """In headings and on the timeline, after the page's scripts ran; "passing ok" is not."""
+    tree = tmp_path / "tree"
+    tree.mkdir()
+    started = timeline_properties(1_790_000_000.0, 1_790_000_002.0, 0.0, 0.0, "1-8")
+    for name in (SPOOFED, "plain ok"):  # the second: the control, a name as it is
+        case = Case.saying(f"pkg.{name}.C", name, Outcome.FAILURE, f"{name} failed")
+        properties = {**started, "runner_version": "0.1.0", "ros_domain_id": "3"}
+        suite = Suite(f"pkg.{name}", [case], 2.0, "2026-09-21T14:13:20", "h", properties)
+        (tree / f"{name[-8:].strip()}.xml").write_bytes(serialise.serialize(suite))
+    page = tmp_path / "page.html"
+    proc = run_cli(["report", "--html", str(page), str(tree)], env)
+    assert proc.returncode == 1, proc.stderr
+    dom = chromium.dump_dom(page)
+    body = dom.xpath("//body")[0].text_content()
+    assert not set(body) & set(DIRECTION_CONTROLS)
+    headings = [node.text_content() for node in dom.xpath("//article//h3")]
+    assert any("\\u202egnissap\\u202c ok" in heading for heading in headings), headings
+    assert any("plain ok" in heading for heading in headings), headings  # the control
+    labels = [bar.text_content() for bar in timeline_bars(dom)]
+    assert sorted(labels) == ["\\u202egnissap\\u202c ok", "plain ok"]
+    for bar in timeline_bars(dom):
+        for value in bar.attrib.values():
+            assert not set(value) & set(DIRECTION_CONTROLS), value
