@@ -105,11 +105,11 @@ def tests_in(trees: tuple[Path, ...]) -> set[str]:
     file's name without its suffix: that is the test's package and ctest name. Other
     files (a producer's own, pytest's) name no test this way and are left out.
     """
+    from ros_isolated_test.report.tree import result_files
     from ros_isolated_test.shard.identity import identity
     from ros_isolated_test.text import display_text
     from ros_isolated_test.xunit import reader
     from ros_isolated_test.xunit.canonical import test_name_of
-    from ros_isolated_test.report.tree import result_files
 
     found: set[str] = set()
     for item in result_files(trees):
