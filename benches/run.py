@@ -35,6 +35,7 @@ from pathlib import Path
 import contention
 import cpu_load
 import exhaustion
+import gain
 import html_report
 import import_costs
 import namespace_mode
@@ -81,6 +82,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "imports": import_costs.run,
     "namespace": namespace_mode.run,
     "shard_cost": shard_cost.run,
+    "gain": gain.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"
