@@ -51,7 +51,7 @@ LAUNCH_DEPENDENCIES = (
 )
 #: Below 9: launch_testing's pytest11 plugin uses a hook argument pytest 9 removed.
 PYTEST = "pytest<9"
-#: Launch files under pytest-xdist (tests/unit/test_launch_cases.py): their cases on one worker.
+#: Launch files under pytest-xdist (tests/unit/pytest_plugin/): their cases on one worker.
 XDIST = "pytest-xdist"
 
 

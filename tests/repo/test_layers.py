@@ -1,7 +1,7 @@
 """The package's imports: no circles, and none from a lower layer to a higher one.
 
-The layers, highest first (``LAYERS``): the entry points (the CLI; the pytest plugin
-with its launch cases), then ``runner``, then ``domain_coordinator``, then ``process``
+The layers, highest first (``LAYERS``): the entry points (the CLI; the ``pytest_plugin``
+package with its launch cases), then ``runner``, then ``domain_coordinator``, then ``process``
 and ``xunit``, then at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``
 and the package's own ``__init__`` (its version). A module imports within its own unit (a
 package, or the modules named together below) or from any lower layer, never from a
@@ -33,9 +33,6 @@ LAYERS = (
         "cli": "cli",
         "__main__": "cli",
         "pytest_plugin": "pytest plugin",
-        "plugin_options": "pytest plugin",
-        "launch_cases": "pytest plugin",
-        "launch_verdicts": "pytest plugin",
     },
     {"runner": "runner"},
     {"domain_coordinator": "domain_coordinator"},

@@ -1,11 +1,11 @@
-"""``pytest_plugin``: machine resources held with the session's ID until pytest ends.
+"""``holding``: machine resources held with the session's ID until pytest ends.
 
 ``--ros-isolated-test-resources`` (or the ini option) is held by the session's own
 reservation: another runner asking for the same gets nothing while the session lives and
 gets it once pytest ended (the control). A bad request is a usage error naming where it
 was given; under xdist each worker holds the request; under a runner of ours the plugin
 holds nothing (the runner holds what it was asked). Real pytest and runner processes.
-Which option wins, and that a request turns isolation on, is test_plugin_options.py's.
+Which option wins, and that a request turns isolation on, is test_options.py's.
 """
 
 from __future__ import annotations

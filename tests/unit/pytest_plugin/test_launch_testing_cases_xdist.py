@@ -1,4 +1,4 @@
-"""``launch_cases`` in one ``pytest -n 2`` session: parameter sets, launches that fail, outcomes.
+"""``launch_testing_cases`` under ``pytest -n 2``: parameter sets, failed launches, outcomes.
 
 Every kind of launch file in one ROS package, run by real pytest-xdist with real
 launch_testing (the outside tier's vendored Jazzy sources, in the launch environment of

@@ -1,12 +1,12 @@
-"""``pytest_plugin`` under pytest-xdist: each worker reserves, the controller decides once.
+"""``holding`` under pytest-xdist: each worker reserves, the controller decides once.
 
 The controller runs no test and holds nothing: it says once what each worker will hold,
 or refuses (an explicit --ros-isolation with a preset ROS_DOMAIN_ID), or says the session
 is NOT isolated; a worker that gets no ID ends the run with the runner's exit code 3,
 never a crash that xdist restarts (each restart waiting the whole timeout again). The
 control: the ID free, the same run passes. Real pytest -n processes; the crosstalk of
-real rclpy workers is test_pytest_plugin_crosstalk.py's, the release on a signal
-test_pytest_plugin_release.py's.
+real rclpy workers is tests/e2e/test_pytest_plugin_crosstalk.py's, the release on a
+signal test_interrupts.py's.
 """
 
 from __future__ import annotations

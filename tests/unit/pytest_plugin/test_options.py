@@ -1,4 +1,4 @@
-"""``plugin_options``: the rules that turn the plugin on, and its options.
+"""``options``: the rules that turn the plugin on, and its options.
 
 On: asked for (``--ros-isolation``, the ``ros_isolation`` ini option in any on word), a
 resource request (outside a ROS package too), or, automatically, inside a ROS package (a
@@ -32,7 +32,7 @@ from helpers.pytest_sessions import (
     run_pytest,
 )
 
-from ros_isolated_test.plugin_options import RESOURCES_OPTION
+from ros_isolated_test.pytest_plugin.options import RESOURCES_OPTION
 
 # --- the whole plugin: isolated or not -----------------------------------------------------------
 
@@ -132,15 +132,15 @@ def test_the_option_wins_over_the_ini_and_turns_isolation_on(
 PROBE = """\
 import json, os
 import pytest
-from ros_isolated_test import plugin_options
+from ros_isolated_test.pytest_plugin import options
 
 def pytest_addoption(parser):
-    plugin_options.add(parser)
+    options.add(parser)
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config):
-    record = {"decided": plugin_options.decide(config),
-              "resources": list(plugin_options.resources(config))}
+    record = {"decided": options.decide(config),
+              "resources": list(options.resources(config))}
     with open(os.environ["DECIDED"], "w") as out:
         json.dump(record, out)
 """

@@ -1,13 +1,13 @@
-"""``pytest_plugin``: each pytest session on a domain ID of its own, as the runner decides.
+"""``holding``: each pytest session on a domain ID of its own, as the runner decides.
 
 Real pytest processes with the installed plugin (entry point ``ros_isolated_test``) on a
 project of their own (helpers/pytest_sessions.py): a preset ROS_DOMAIN_ID or Gazebo
 partition is refused when isolation is asked for and left alone (said so) when it is
 automatic; DISABLE_ROS_ISOLATION and a runner of ours around pytest are respected; a pool
-with no free ID waits, then fails with the runner's exit code; os.environ is restored
-after the session; and the plugin costs nothing where it is not active. Each refusal has
-its control. The rules that turn the plugin on are test_plugin_options.py's; xdist,
-resources, the release and real crosstalk have topic files beside this one.
+with no free ID waits, then fails with the plugin's exit code; os.environ is restored
+after the session. Each refusal has its control. The rules that turn the plugin on are
+test_options.py's, what the plugin costs where it is not active test_plugin.py's; xdist,
+resources and the release have topic files beside this one, signals test_interrupts.py.
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def test_a_mark_for_another_id_is_no_runner(tmp_path: Path, plain_env: dict[str,
     assert "refusing to run" in done.stderr
 
 
-# --- the pool, the session's end, the import cost ------------------------------------------------
+# --- the pool, the session's end -----------------------------------------------------------------
 
 
 def test_pool_exhausted_waits_then_fails(
@@ -161,25 +161,6 @@ def test_os_environ_is_restored_after_the_session(
     starts = f"ros-isolated-test: ROS_DOMAIN_ID {domain},"
     assert sum(line.startswith(starts) for line in header_lines(done.stdout)) == 2
     assert "held by the runner" not in done.stdout
-
-
-def test_inactive_plugin_imports_nothing_of_the_runner(tmp_path: Path, env: dict[str, str]) -> None:
-    """Loaded by every pytest run: outside a ROS package it must cost nothing."""
-    check = """\
-import sys
-
-def test_modules():
-    heavy = ("lxml", "filelock", "ros_isolated_test.runner", "ros_isolated_test.domain_coordinator")
-    assert "ros_isolated_test.pytest_plugin" in sys.modules
-    loaded = [name for name in sys.modules if name.startswith(heavy)]
-    assert loaded == [], loaded
-"""
-    root = project(tmp_path / "plain", check, package=False)
-    done = run_pytest(root, env, "test")
-    assert done.returncode == 0, done.stdout + done.stderr
-    active = run_pytest(project(tmp_path / "ros", check), env, "test")  # the control
-    assert active.returncode == 1, active.stdout
-    assert "ros_isolated_test.runner" in active.stdout
 
 
 # --- a Gazebo transport partition of the session's own -------------------------------------------
