@@ -28,6 +28,13 @@ if TYPE_CHECKING:
 
 #: Where a worker tells the xdist controller it got no ID (the controller exits with it).
 ERROR_KEY = "ros_isolation_error"
+#: pytest's exit code when no ID (or not the resources asked for) became free in time, or
+#: the lock directory is unusable: nothing was run. pytest's own codes are 0 to 5
+#: (``pytest.ExitCode``), so the runner's 3 would read as pytest's INTERNAL_ERROR; this
+#: is sysexits.h's EX_TEMPFAIL (a temporary failure: try again later), which neither
+#: pytest nor the runner uses. A refusal (a preset ID, a bad setting) is pytest's usage
+#: error, 4; a signal pytest's 2 (docs/reference.md, "The pytest plugin's exit codes").
+NO_ID_EXIT = 75
 
 
 class State:
@@ -51,7 +58,7 @@ def isolate(config: pytest.Config, state: State, explicit: bool, controller: boo
     from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
     from ros_isolated_test.process.namespace import NamespaceError
     from ros_isolated_test.process.supervisor import KILL_GRACE
-    from ros_isolated_test.runner import environment, exit_codes, settings, summary
+    from ros_isolated_test.runner import environment, settings, summary
     from ros_isolated_test.runner.discovery import DiscoveryError
     from ros_isolated_test.runner.isolation import isolation
 
@@ -97,7 +104,7 @@ def isolate(config: pytest.Config, state: State, explicit: bool, controller: boo
         state.error = f"ros-isolated-test: error: {error}"
         if worker:
             return  # said to the controller (pytest_collection): a crash would be restarted
-        pytest.exit(state.error, returncode=exit_codes.NO_DOMAIN)
+        pytest.exit(state.error, returncode=NO_ID_EXIT)
     except NamespaceError as error:  # probed allowed, then refused to this process
         raise pytest.UsageError(f"ros-isolated-test: {policy.refusal(error)}") from None
     assert held is not None  # isolated, or resources held without an ID

@@ -96,12 +96,11 @@ def pytest_collection(session: pytest.Session) -> None:
     state = session.config.stash.get(_STATE, None)
     output = getattr(session.config, "workeroutput", None)
     if state is not None and state.error is not None and output is not None:
-        from ros_isolated_test.pytest_plugin.holding import ERROR_KEY
-        from ros_isolated_test.runner import exit_codes
+        from ros_isolated_test.pytest_plugin.holding import ERROR_KEY, NO_ID_EXIT
 
         output[ERROR_KEY] = state.error
         session.shouldstop = state.error  # the controller stops every worker
-        pytest.exit(state.error, returncode=exit_codes.NO_DOMAIN)  # 2 would be a restart
+        pytest.exit(state.error, returncode=NO_ID_EXIT)  # 2 would be a restart
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -166,12 +165,11 @@ def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]
     from ros_isolated_test.pytest_plugin import holding
 
     if state.error is not None and not hasattr(config, "workerinput"):
-        # The xdist controller: a worker that got no ID makes the run's code the runner's.
+        # The xdist controller: a worker that got no ID makes the run's code the plugin's.
         from ros_isolated_test.pytest_plugin.interrupts import note
-        from ros_isolated_test.runner import exit_codes
 
         note(state.error.removeprefix("ros-isolated-test: "))
-        session.exitstatus = exit_codes.NO_DOMAIN
+        session.exitstatus = holding.NO_ID_EXIT
     holding.release(state)
 
 

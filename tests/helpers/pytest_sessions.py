@@ -20,6 +20,9 @@ from helpers.processes import wait_for
 PYTEST = (sys.executable, "-m", "pytest", "-p", "no:cacheprovider")
 #: The plugin off, as a user turns it off.
 OFF = ("-p", "no:ros_isolated_test")
+#: pytest's exit when the plugin got no ID (docs/reference.md): sysexits' EX_TEMPFAIL, none
+#: of pytest's own codes (0 to 5: 3 is its internal error) nor the runner's.
+NO_ID_EXIT = 75
 #: The least package.xml that makes a folder a ROS package.
 PACKAGE_XML = "<package format='3'><name>pkg</name></package>\n"
 #: Where RECORDING_TEST writes (the ``plain_env`` of the tests names it).

@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from helpers.commands import CLI, HUNG
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     PYTEST,
     header_lines,
     hold_the_one_id,
@@ -113,18 +114,35 @@ def test_pool_exhausted_waits_then_fails(
     one_id: dict[str, str],
     started: list[subprocess.Popen[bytes]],
 ) -> None:
+    """Exit 75, the plugin's own code: pytest's 3 would say pytest itself broke."""
     root = project(tmp_path / "pkg")
     holder = hold_the_one_id(tmp_path, exhausted_env, started)
     done = run_pytest(root, exhausted_env, "test")
-    assert done.returncode == 3, done.stdout + done.stderr
+    assert done.returncode == NO_ID_EXIT, done.stdout + done.stderr
+    assert NO_ID_EXIT not in set(pytest.ExitCode)
     assert "waiting for a free ROS_DOMAIN_ID" in done.stderr
     assert "after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
+    assert "INTERNALERROR" not in done.stdout + done.stderr
     assert not (tmp_path / "record.json").exists()
     holder.terminate()  # the runner ends its test, then releases the ID
     holder.wait(HUNG)
     again = run_pytest(root, exhausted_env, "test")  # the control: the ID free, the same run passes
     assert again.returncode == 0, again.stdout + again.stderr
     assert recorded(tmp_path)["ROS_DOMAIN_ID"] == one_id["ROS_ISOLATED_TEST_DOMAINS"]
+
+
+def test_control_pytests_own_internal_error_keeps_its_3_under_the_plugin(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    """The control for the plugin's own code: pytest's 3 means pytest broke, and still does."""
+    root = project(tmp_path / "pkg")
+    hook = "def pytest_collection_modifyitems():\n    raise RuntimeError('a broken hook')\n"
+    (root / "conftest.py").write_text(hook)
+    done = run_pytest(root, plain_env, "test")
+    output = done.stdout + done.stderr
+    assert done.returncode == pytest.ExitCode.INTERNAL_ERROR, output
+    assert "INTERNALERROR> RuntimeError: a broken hook" in output, output
+    assert "ros-isolated-test: ROS_DOMAIN_ID" in done.stdout, output  # isolated meanwhile
 
 
 #: Two pytest sessions in one process (an embedding program).

@@ -18,6 +18,7 @@ import pytest
 from helpers.commands import CLI, HUNG
 from helpers.processes import wait_for
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     PYTEST,
     project,
     run_in,
@@ -96,7 +97,7 @@ def test_xdist_holds_the_resources_per_worker(
     tmp_path: Path, resource_env: dict[str, str], capacity: str
 ) -> None:
     """Two workers, lidar=1 each: they fit a capacity of 2; with 1, the second worker waits
-    for the first, which holds it until pytest ends: no lidar in time, exit 3."""
+    for the first, which holds it until pytest ends: no lidar in time, exit 75."""
     root = project(tmp_path / "pkg")
     env = {
         **resource_env,
@@ -109,7 +110,7 @@ def test_xdist_holds_the_resources_per_worker(
     if capacity == "lidar=2":
         assert done.returncode == 0, output
     else:
-        assert done.returncode == 3, output
+        assert done.returncode == NO_ID_EXIT, output
         assert "crashed" not in output and "restarting" not in output, output
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pytest
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     OFF,
     PACKAGE_XML,
     header_lines,
@@ -97,7 +98,7 @@ def test_options_that_run_no_test_reserve_nothing(
     started: list[subprocess.Popen[bytes]],
     option: str,
 ) -> None:
-    """The pool's one ID held: they still answer at once (a reservation would fail: 3)."""
+    """The pool's one ID held: they still answer at once (a reservation would fail: 75)."""
     root = project(tmp_path / "pkg")
     env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}
     hold_the_one_id(tmp_path, env, started)
@@ -105,7 +106,7 @@ def test_options_that_run_no_test_reserve_nothing(
     assert done.returncode == 0, done.stdout + done.stderr
     assert "no free ROS_DOMAIN_ID" not in done.stderr
     control = run_pytest(root, env, "test")
-    assert control.returncode == 3, control.stdout + control.stderr
+    assert control.returncode == NO_ID_EXIT, control.stdout + control.stderr
 
 
 @pytest.mark.parametrize("package", [True, False])
