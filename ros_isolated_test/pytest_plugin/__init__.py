@@ -13,6 +13,8 @@ session it drives:
   passes them on to its workers and waits for them;
 - ``launch_testing_cases`` and ``launch_testing_verdicts``: launch_testing files reported
   case by case (the only modules that read launch_testing);
+- ``launch_pytest_tests``: launch_pytest's tests each reported as itself, a launch that
+  fails one error (the only module that reads launch_pytest);
 - ``scheduling``: pytest-xdist keeps a launch's tests on one worker.
 
 Nothing here is imported by pytest until the plugin's hooks ask for it.

@@ -5,8 +5,10 @@ no unconfigure, so what the tests left running is never ended (a plain fork even
 the lock) and the ID stays held. Once the release began, a signal is only noted: a second
 Ctrl-C must not cut the sweep short. With xdist the workers hold the IDs: the controller
 passes each signal on to them (else they learn of its end only from execnet, 5 s later,
-and are killed mid-sweep 10 s later), then waits for them. Apart from holding.py, which
-decides and reserves: this knows signals, processes and xdist's workers, nothing of IDs.
+and are killed mid-sweep 10 s later), then waits for them. A test that catches the
+interrupt does not keep the session going: the next test is not started. Apart from
+holding.py, which decides and reserves: this knows signals, processes and xdist's
+workers, nothing of IDs.
 """
 
 from __future__ import annotations
@@ -54,6 +56,15 @@ class Interrupts:
 
         previous = signals.set_handlers(stop)
         stack.callback(signals.restore_handlers, previous)
+
+    def stop_if_interrupted(self) -> None:
+        """A signal a test swallowed still ends the session: no further test runs (exit 2).
+
+        A test may catch the KeyboardInterrupt; launch_pytest's wait for its launch turns
+        it into an AttributeError.
+        """
+        if self.interrupted and not self.closing:
+            raise KeyboardInterrupt("a signal ended the session; a test had caught it")
 
     def add_worker(self, node: Any) -> None:
         """The xdist controller: a local worker's PID, to pass a signal on to it."""

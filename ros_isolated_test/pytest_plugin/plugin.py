@@ -12,8 +12,10 @@ options (options.py, light) until it knows it is active: inside a ROS package (a
 package.xml at or above the rootdir or the test paths), or asked for with
 ``--ros-isolation`` or the ``ros_isolation`` ini option.
 Where launch_testing's own plugin is loaded, its launch files are reported case by case
-(launch_testing_cases.py, whatever isolation decides; ``-p no:ros_isolated_test`` turns
-it off), and pytest-xdist keeps a launch file's cases on one worker (scheduling.py).
+(launch_testing_cases.py); where launch_pytest's is, each of its tests is reported as
+itself and a launch that fails is one error (launch_pytest_tests.py). Both whatever
+isolation decides (``-p no:ros_isolated_test`` turns them off); pytest-xdist keeps a
+launch's tests on one worker (scheduling.py).
 """
 
 from __future__ import annotations
@@ -46,6 +48,12 @@ def pytest_configure(config: pytest.Config) -> None:
 
         if not config.pluginmanager.has_plugin(launch_testing_cases.PLUGIN_NAME):
             config.pluginmanager.register(launch_testing_cases, launch_testing_cases.PLUGIN_NAME)
+    if _launch_pytest_loaded(config):  # each test as itself, a failed launch one error
+        from ros_isolated_test.pytest_plugin import launch_pytest_tests
+
+        if not config.pluginmanager.has_plugin(launch_pytest_tests.PLUGIN_NAME):
+            tests = launch_pytest_tests.LaunchPytestTests()
+            config.pluginmanager.register(tests, launch_pytest_tests.PLUGIN_NAME)
     from ros_isolated_test.pytest_plugin import options
 
     explicit = options.decide(config)
@@ -61,6 +69,10 @@ def pytest_configure(config: pytest.Config) -> None:
 
 def _launch_testing_loaded() -> bool:
     return "launch_testing.pytest.hooks" in sys.modules
+
+
+def _launch_pytest_loaded(config: pytest.Config) -> bool:
+    return config.pluginmanager.has_plugin("launch_pytest")
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
@@ -103,6 +115,14 @@ def pytest_collection(session: pytest.Session) -> None:
         pytest.exit(state.error, returncode=NO_ID_EXIT)  # 2 would be a restart
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item) -> None:
+    """No test starts once a signal ended the session, though a test caught it."""
+    state = item.config.stash.get(_STATE, None)
+    if state is not None:
+        state.interrupts.stop_if_interrupted()
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_testnodedown(node: object, error: object) -> None:
     """The xdist controller: each worker's ID into the controller's --junit-xml."""
@@ -138,12 +158,13 @@ def pytest_configure_node(node: Any) -> None:
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """A launch file's cases as one unit of work (scheduling.py); else xdist's own."""
-    if not _launch_testing_loaded():
+    """A launch's tests as one unit of work (scheduling.py); else xdist's own."""
+    launch_pytest = _launch_pytest_loaded(config)
+    if not launch_pytest and not _launch_testing_loaded():
         return None
     from ros_isolated_test.pytest_plugin import scheduling
 
-    return scheduling.scheduler(config, log)
+    return scheduling.scheduler(config, log, launch_pytest)
 
 
 @pytest.hookimpl(hookwrapper=True, trylast=True)

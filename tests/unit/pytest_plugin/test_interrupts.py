@@ -1,7 +1,8 @@
 """``interrupts``: a signal ends a pytest session as Ctrl-C does, and its leftovers still end.
 
 SIGTERM or SIGHUP (ctest's or colcon's timeout, a CI cancel) ends pytest as Ctrl-C does,
-the sweep runs, and a second signal cannot cut it short. Under xdist the controller
+the sweep runs, and a second signal cannot cut it short; a test that swallows the
+interrupt does not keep the session going. Under xdist the controller
 passes the signal on to its workers and waits for them; a worker whose controller was
 killed still sweeps and releases. Controls: Ctrl-C with xdist, SIGTERM without; status
 shows each ID held while the tests run. The release's order without a signal is
@@ -78,6 +79,52 @@ def test_a_signal_ends_the_tests_leftovers_before_the_release(
     following = project(tmp_path / "following", NEXT_TEST)
     after = run_pytest(following, {**shared, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}, "test")
     assert after.returncode == 0, after.stdout + after.stderr
+
+
+#: The first test swallows the interrupt (as launch_pytest's wait for its launch does: its
+#: KeyboardInterrupt becomes an AttributeError); the second notes that it ran.
+SWALLOWING_TEST = """\
+import os, pathlib, time
+
+def test_swallows_the_interrupt():
+    pathlib.Path(os.environ["READY"]).touch()
+    try:
+        time.sleep(300)
+    except KeyboardInterrupt:
+        pass
+
+def test_runs_next():
+    pathlib.Path(os.environ["NEXT"]).touch()
+"""
+
+
+@pytest.mark.parametrize("signum", [15, None], ids=["sigterm", "no-signal"])
+def test_a_swallowed_signal_still_ends_the_session(
+    tmp_path: Path,
+    env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    signum: int | None,
+) -> None:
+    """SIGTERM once (a ctest or colcon timeout), caught by a test: no later test runs and
+    pytest exits 2, never a pass. The control: no signal, the swallowing test ends by
+    itself (GO) and the next test runs."""
+    ready, following = tmp_path / "ready", tmp_path / "next"
+    shared = {**one_id, "READY": str(ready), "NEXT": str(following)}
+    if signum is None:  # the control: the sleep ends by itself, early
+        test = SWALLOWING_TEST.replace("time.sleep(300)", "time.sleep(0)")
+    else:
+        test = SWALLOWING_TEST
+    log = tmp_path / "pytest.log"
+    session = start_pytest(project(tmp_path / "pkg", test), shared, log, started)
+    wait_for(ready)
+    if signum is not None:
+        session.send_signal(signum)
+        assert session.wait(HUNG) == pytest.ExitCode.INTERRUPTED, log.read_text()
+        assert not following.exists(), log.read_text()
+    else:
+        assert session.wait(HUNG) == pytest.ExitCode.OK, log.read_text()
+        assert following.exists(), log.read_text()
 
 
 # --- a signal to the xdist controller, or the controller killed ----------------------------------
