@@ -38,7 +38,7 @@ class InstalledPackage(unittest.TestCase):
             for entry in metadata.entry_points(group="pytest11")
             if entry.name == "ros_isolated_test"
         }
-        self.assertEqual(found, {"ros_isolated_test": "ros_isolated_test.pytest_plugin"})
+        self.assertEqual(found, {"ros_isolated_test": "ros_isolated_test.pytest_plugin.plugin"})
 
 
 if __name__ == "__main__":

@@ -27,8 +27,9 @@ modules=(
   tests/unit/test_cli_run.py
   tests/unit/test_cli_result_paths.py
   tests/unit/runner/ament/test_run_test_isolated.py
-  tests/unit/test_pytest_plugin.py
-  tests/unit/test_plugin_options.py
+  tests/unit/pytest_plugin/test_plugin.py
+  tests/unit/pytest_plugin/test_holding.py
+  tests/unit/pytest_plugin/test_options.py
   tests/unit/xunit/test_result_file.py
   tests/unit/xunit/test_placeholder.py
   tests/unit/xunit/test_serialise.py

@@ -204,7 +204,8 @@ def test_colcon_builds_it_first_and_installs_the_four_things(workspace: Workspac
     assert manifest.read_bytes() == (REPO / "package.xml").read_bytes()
     entry_points = list(installed.glob("lib/python3*/site-packages/*.egg-info/entry_points.txt"))
     assert len(entry_points) == 1, entry_points
-    assert "ros_isolated_test = ros_isolated_test.pytest_plugin" in entry_points[0].read_text()
+    plugin_entry = "ros_isolated_test = ros_isolated_test.pytest_plugin.plugin"
+    assert plugin_entry in entry_points[0].read_text()
     cache = (workspace.root / "build" / PROBES / "CMakeCache.txt").read_text()
     assert f"{PACKAGE}_DIR:PATH={installed / 'share' / PACKAGE / 'cmake'}" in cache
 
@@ -231,7 +232,7 @@ def test_sourced_the_command_the_plugin_and_the_cmake_package_are_found(
     )
     plugin = str(workspace.install / "lib")
     assert re.search(
-        rf"ros_isolated_test\.pytest_plugin' from '{re.escape(plugin)}", trace.stdout
+        rf"ros_isolated_test\.pytest_plugin\.plugin' from '{re.escape(plugin)}", trace.stdout
     ), trace.stdout
     (tmp_path / "finder").mkdir()
     (tmp_path / "finder" / "CMakeLists.txt").write_text(FINDER_CMAKE)

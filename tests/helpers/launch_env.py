@@ -1,15 +1,17 @@
-"""A virtualenv for the launch tier: real launch_testing beside ROS 2 Jazzy and this project.
+"""A virtualenv for the launch tier: real launch_testing and launch_pytest beside ROS 2 Jazzy.
 
-launch_testing is in no registry, so it comes from the vendored Jazzy sources in the
-outside tier (``../shared``), and its pytest plugin breaks pytest 9, which the suite's own
-``.venv`` has: so it lives in an environment of its own, never in ``.venv``. It holds the
-ros extra (read from pyproject.toml, so the two never drift), ``pytest<9`` and
-pytest-xdist, the vendored ``launch`` packages (``--no-deps``: their metadata names
-packages PyPI spells otherwise), ``launch_testing_ament_cmake`` installed by CMake into its
-prefix, and this project as an editable install of the checkout. An editable install
-copies no data files, so the CMake package is linked in by hand where pip would put it
-(``share/ros_isolated_test/cmake`` beside ``bin/ros-isolated-test``): the launch tier
-finds it in its own prefix, never through another environment's.
+launch_testing and launch_pytest are in no registry, so they come from the vendored Jazzy
+sources in the outside tier (``../shared``), and their pytest plugins break pytest 9,
+which the suite's own ``.venv`` has (launch_pytest breaks on pytest 8 already): so they
+live in an environment of their own, never in ``.venv``, where both plugins are loaded by
+every pytest run, as on a ROS machine. It holds the ros extra (read from pyproject.toml,
+so the two never drift), ``pytest<8`` (Jazzy's) and pytest-xdist, the vendored
+``launch`` packages (``--no-deps``: their metadata names packages PyPI spells otherwise),
+``launch_testing_ament_cmake`` installed by CMake into its prefix, and this project as
+an editable install of the checkout. An editable install copies no data files, so the
+CMake package is linked in by hand where pip would put it (``share/ros_isolated_test/cmake``
+beside ``bin/ros-isolated-test``): the launch tier finds it in its own prefix, never
+through another environment's.
 
 It is built once and kept in ``.venv-launch/`` (git-ignored), keyed by a hash of
 everything it is made of; a change to any of those builds it again. A lock keeps two
@@ -39,7 +41,7 @@ PYTHON = PREFIX / "bin" / "python"
 CMAKE_PACKAGE = PREFIX / "share" / "ros_isolated_test" / "cmake"
 CMAKE_FILES = REPO / "ros_isolated_test" / "cmake"
 #: The vendored Python packages, in dependency order.
-PYTHON_PACKAGES = ("launch", "launch_xml", "launch_yaml", "launch_testing")
+PYTHON_PACKAGES = ("launch", "launch_xml", "launch_yaml", "launch_testing", "launch_pytest")
 #: What the vendored packages need from PyPI (their setup.py names them otherwise or not).
 LAUNCH_DEPENDENCIES = (
     "osrf-pycommon",
@@ -49,9 +51,12 @@ LAUNCH_DEPENDENCIES = (
     # launch_testing_ament_cmake's CMake config finds PythonExtra through it.
     "ros-jazzy-python-cmake-module",
 )
-#: Below 9: launch_testing's pytest11 plugin uses a hook argument pytest 9 removed.
-PYTEST = "pytest<9"
-#: Launch files under pytest-xdist (tests/unit/test_launch_cases.py): their cases on one worker.
+#: What ROS 2 Jazzy runs on Ubuntu 24.04 (pytest 7.4): launch_testing's pytest11 plugin uses
+#: a hook argument pytest 9 removed; launch_pytest reads ``_pytestfixturefunction``, which
+#: 8.4's fixtures no longer have, and a generator test of a module-scoped launch calls
+#: ``getfixtureinfo(funcargs=...)``, which pytest 8 removed (a TypeError on 8.0 to 8.3).
+PYTEST = "pytest<8"
+#: Launch files under pytest-xdist (tests/unit/pytest_plugin/): their cases on one worker.
 XDIST = "pytest-xdist"
 
 

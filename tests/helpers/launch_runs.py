@@ -1,10 +1,11 @@
 """Runs of launch files under pytest, colcon or ctest, and what each left behind.
 
-For the tests of launch_cases.py and launch_verdicts.py (tests/unit/test_launch_*.py): the
-launch tier's own environment (helpers/launch_env.py: real launch_testing from the outside
-tier's vendored Jazzy sources), colcon's environment around it with a lock dir and pool of
-the run's own, and a run read back: its output, the launch log every launch and case
-writes (helpers/launch_files.py), the talkers' records and pytest's own result files.
+For the tests of the pytest plugin's launch modules (tests/unit/pytest_plugin/test_launch_*,
+tests/e2e/test_launch_*): the launch tier's own environment (helpers/launch_env.py: real
+launch_testing from the outside tier's vendored Jazzy sources), colcon's environment
+around it with a lock dir and pool of the run's own, and a run read back: its output, the
+launch log every launch and case writes (helpers/launch_files.py), the talkers' records
+and pytest's own result files.
 """
 
 from __future__ import annotations

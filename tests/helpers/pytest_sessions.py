@@ -1,8 +1,8 @@
 """pytest sessions as real processes, in a project of their own, for the plugin's tests.
 
-Every test of the pytest plugin (tests/unit/test_pytest_plugin*.py, test_plugin_options.py)
-writes a project (a ``pytest.ini`` that keeps this repository's config out, one test file,
-a ``package.xml`` when it is a ROS package), runs the installed plugin on it with this
+Every test of the pytest plugin (tests/unit/pytest_plugin/) writes a project (a
+``pytest.ini`` that keeps this repository's config out, one test file, a ``package.xml``
+when it is a ROS package), runs the installed plugin on it with this
 suite's own interpreter, and reads what the test recorded and what the plugin said.
 """
 
@@ -20,6 +20,9 @@ from helpers.processes import wait_for
 PYTEST = (sys.executable, "-m", "pytest", "-p", "no:cacheprovider")
 #: The plugin off, as a user turns it off.
 OFF = ("-p", "no:ros_isolated_test")
+#: pytest's exit when the plugin got no ID (docs/reference.md): sysexits' EX_TEMPFAIL, none
+#: of pytest's own codes (0 to 5: 3 is its internal error) nor the runner's.
+NO_ID_EXIT = 75
 #: The least package.xml that makes a folder a ROS package.
 PACKAGE_XML = "<package format='3'><name>pkg</name></package>\n"
 #: Where RECORDING_TEST writes (the ``plain_env`` of the tests names it).
@@ -34,6 +37,15 @@ def test_records():
     record = {name: os.environ.get(name) for name in names}
     with open(os.environ["PLUGIN_RECORD"], "w") as out:
         json.dump(record, out)
+"""
+
+#: The next session's test: notes in $EVENTS that it ran, and on which ID (a release's order).
+NEXT_TEST = """\
+import os
+
+def test_runs_next():
+    with open(os.environ["EVENTS"], "a") as out:
+        out.write(f"next test on {os.environ['ROS_DOMAIN_ID']}\\n")
 """
 
 

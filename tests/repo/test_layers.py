@@ -1,7 +1,7 @@
 """The package's imports: no circles, and none from a lower layer to a higher one.
 
-The layers, highest first (``LAYERS``): the entry points (the CLI; the pytest plugin
-with its launch cases), then ``runner``, then ``report`` (a tree of result files
+The layers, highest first (``LAYERS``): the entry points (the CLI; the ``pytest_plugin``
+package with its launch cases), then ``runner``, then ``report`` (a tree of result files
 counted, printed and drawn: it reads each file through ``xunit``, and sits below
 ``runner`` so that a runner may read what a report wrote, such as measured durations),
 then ``domain_coordinator``, then ``process`` and ``xunit``, then ``shard`` (splitting
@@ -38,9 +38,6 @@ LAYERS = (
         "cli_shard": "cli",
         "__main__": "cli",
         "pytest_plugin": "pytest plugin",
-        "plugin_options": "pytest plugin",
-        "launch_cases": "pytest plugin",
-        "launch_verdicts": "pytest plugin",
     },
     {"runner": "runner"},
     {"report": "report"},

@@ -1,8 +1,8 @@
 """The pytest plugin's options, and the rules that turn it on for a run.
 
-Apart from pytest_plugin.py, which reserves and releases: this is what every pytest run
-in the environment reads, active or not, so it imports nothing but pytest (and
-``switches``, the on/off words, to read the ini option). On: asked for (``--ros-isolation``
+Apart from holding.py, which reserves and releases: this is what every pytest run in the
+environment reads, active or not, so it imports nothing but pytest (and ``switches``,
+the on/off words, to read the ini option). On: asked for (``--ros-isolation``
 or the ``ros_isolation`` ini option), machine resources requested, or, automatically,
 inside a ROS package (a package.xml at or above the rootdir or the test paths).
 """

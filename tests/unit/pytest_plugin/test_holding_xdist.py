@@ -1,12 +1,12 @@
-"""``pytest_plugin`` under pytest-xdist: each worker reserves, the controller decides once.
+"""``holding`` under pytest-xdist: each worker reserves, the controller decides once.
 
 The controller runs no test and holds nothing: it says once what each worker will hold,
 or refuses (an explicit --ros-isolation with a preset ROS_DOMAIN_ID), or says the session
-is NOT isolated; a worker that gets no ID ends the run with the runner's exit code 3,
+is NOT isolated; a worker that gets no ID ends the run with the plugin's exit code 75,
 never a crash that xdist restarts (each restart waiting the whole timeout again). The
 control: the ID free, the same run passes. Real pytest -n processes; the crosstalk of
-real rclpy workers is test_pytest_plugin_crosstalk.py's, the release on a signal
-test_pytest_plugin_release.py's.
+real rclpy workers is tests/e2e/test_pytest_plugin_crosstalk.py's, the release on a
+signal test_interrupts.py's.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from helpers.commands import HUNG
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     header_lines,
     hold_the_one_id,
     project,
@@ -59,14 +60,14 @@ def test_xdist_with_disable_ros_isolation_says_so(
     assert recorded(tmp_path)["ROS_DOMAIN_ID"] is None
 
 
-def test_xdist_pool_exhausted_exits_3_without_restarting_workers(
+def test_xdist_pool_exhausted_exits_75_without_restarting_workers(
     tmp_path: Path, exhausted_env: dict[str, str], started: list[subprocess.Popen[bytes]]
 ) -> None:
     root = project(tmp_path / "pkg")
     holder = hold_the_one_id(tmp_path, exhausted_env, started)
     done = run_pytest(root, exhausted_env, "-n", "2", "test")
     output = done.stdout + done.stderr
-    assert done.returncode == 3, output
+    assert done.returncode == NO_ID_EXIT, output
     assert "ros-isolated-test: error: after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
     assert "crashed" not in output and "restarting" not in output, output
     assert not (tmp_path / "record.json").exists()

@@ -1,4 +1,4 @@
-"""``launch_cases`` in one ``pytest -n 2`` session: parameter sets, launches that fail, outcomes.
+"""``launch_testing_cases`` under ``pytest -n 2``: parameter sets, failed launches, outcomes.
 
 Every kind of launch file in one ROS package, run by real pytest-xdist with real
 launch_testing (the outside tier's vendored Jazzy sources, in the launch environment of
@@ -7,8 +7,9 @@ launched once per parameter set, its cases named with it; a launch that cannot s
 stops before its tests finished, is one error and no case passed; every ``unittest``
 outcome is a result with its own message; a launch file and its cases stay on one worker,
 each worker on an ID of its own, and an ordinary pytest test beside them is left as it is.
-launch_pytest (one pytest item per test already) is not among the vendored sources: the
-plugin only ever replaces launch_testing's items.
+launch_pytest's plugin is loaded too (one pytest item per test already): only
+launch_testing's items are ever replaced; launch_pytest files are
+test_launch_pytest_tests.py's.
 """
 
 from __future__ import annotations

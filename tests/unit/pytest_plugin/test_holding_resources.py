@@ -1,11 +1,11 @@
-"""``pytest_plugin``: machine resources held with the session's ID until pytest ends.
+"""``holding``: machine resources held with the session's ID until pytest ends.
 
 ``--ros-isolated-test-resources`` (or the ini option) is held by the session's own
 reservation: another runner asking for the same gets nothing while the session lives and
 gets it once pytest ended (the control). A bad request is a usage error naming where it
 was given; under xdist each worker holds the request; under a runner of ours the plugin
 holds nothing (the runner holds what it was asked). Real pytest and runner processes.
-Which option wins, and that a request turns isolation on, is test_plugin_options.py's.
+Which option wins, and that a request turns isolation on, is test_options.py's.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import pytest
 from helpers.commands import CLI, HUNG
 from helpers.processes import wait_for
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     PYTEST,
     project,
     run_in,
@@ -96,7 +97,7 @@ def test_xdist_holds_the_resources_per_worker(
     tmp_path: Path, resource_env: dict[str, str], capacity: str
 ) -> None:
     """Two workers, lidar=1 each: they fit a capacity of 2; with 1, the second worker waits
-    for the first, which holds it until pytest ends: no lidar in time, exit 3."""
+    for the first, which holds it until pytest ends: no lidar in time, exit 75."""
     root = project(tmp_path / "pkg")
     env = {
         **resource_env,
@@ -109,7 +110,7 @@ def test_xdist_holds_the_resources_per_worker(
     if capacity == "lidar=2":
         assert done.returncode == 0, output
     else:
-        assert done.returncode == 3, output
+        assert done.returncode == NO_ID_EXIT, output
         assert "crashed" not in output and "restarting" not in output, output
 
 

@@ -1,10 +1,10 @@
 """What ``unittest`` recorded for a launch's cases, read as one verdict per case.
 
-Apart from launch_cases.py, which runs the launch and reports its cases as pytest items:
-reading a result knows nothing of pytest, only ``unittest``'s records (errors, failures,
+Apart from launch_testing_cases.py, which runs the launch and reports its cases as pytest
+items: reading a result knows nothing of pytest, only ``unittest``'s records (errors, failures,
 skips, expected failures, class and module fixtures) and launch_testing's result types.
-Whatever is not as expected raises ``Mismatch``, which launch_cases turns into its one
-warning.
+Whatever is not as expected raises ``Mismatch``, which launch_testing_cases turns into
+its one warning.
 """
 
 from __future__ import annotations

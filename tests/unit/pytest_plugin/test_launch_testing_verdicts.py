@@ -1,16 +1,17 @@
-"""``launch_verdicts``: what ``unittest`` recorded for a launch's cases, one verdict per case.
+"""``launch_testing_verdicts``: what ``unittest`` recorded for a launch's cases, one verdict
+per case.
 
 launch_testing runs a launch's active tests, then its post-shutdown tests, each with
 ``unittest.TextTestRunner(resultclass=launch_testing.test_result.TestResult)``, and appends
-the second result to the first; launch_cases asks ``read`` what each case got, and shows
-each failure by the exception its traceback ends with. Here real ``unittest`` cases run
+the second result to the first; launch_testing_cases asks ``read`` what each case got,
+and shows each failure by the exception its traceback ends with. Here real ``unittest`` cases run
 exactly so, with launch_testing's own result classes (test_result.py of the outside tier's
 vendored Jazzy sources, which imports nothing but ``unittest``), and every outcome is read
 back: passed, failed, error, skipped, expected failure, unexpected success, subtests (the
 worst, every text kept), a class fixture that failed (an error of its cases not run, or
 after its last case), and a case nothing was recorded for. A result that is not
-launch_testing's is a Mismatch (launch_cases' one warning); the control: launch_testing's
-own result of the same run reads case by case.
+launch_testing's is a Mismatch (launch_testing_cases' one warning); the control:
+launch_testing's own result of the same run reads case by case.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from helpers import capabilities, launch_runs
 from helpers.capabilities import LAUNCH_SOURCES
 from helpers.commands import run_process
 
-from ros_isolated_test.launch_verdicts import (
+from ros_isolated_test.pytest_plugin.launch_testing_verdicts import (
     ERROR,
     FAILED,
     PASSED,
@@ -329,7 +330,7 @@ def test_fail_result_type_is_a_mismatch_where_launch_testing_is_missing(
 #: In the launch environment: whether fail_result_type() finds launch_testing's own class.
 FINDS_FAIL_RESULT = """\
 import launch_testing.test_result
-from ros_isolated_test.launch_verdicts import fail_result_type
+from ros_isolated_test.pytest_plugin.launch_testing_verdicts import fail_result_type
 print(fail_result_type() is launch_testing.test_result.FailResult)
 """
 

@@ -8,15 +8,15 @@ post-shutdown tests, named as launch_testing names them (``TestWhileRunning.test
 with the parameter set of a ``launch_testing.parametrize`` run, ``test_x[a, 1]``). The
 first case of a run to execute launches it with launch_testing's own runner, once per
 parameter set; each case then reports what ``unittest`` recorded for it (read into
-verdicts by launch_verdicts.py). A launch that cannot start, or stops before its tests
+verdicts by launch_testing_verdicts.py). A launch that cannot start, or stops before its tests
 finished, is one error; its other cases are skipped, none passed.
 
-Everything read of launch_testing is read here and in launch_verdicts.py, and checked
-when a file is collected.
+Everything read of launch_testing is read here and in launch_testing_verdicts.py, and
+checked when a file is collected.
 Where launch_testing is not as expected, the file stays the one test launch_testing made,
 with one warning per session: the run goes on as before, never broken. Other collectors
 (launch_pytest's among them) are left alone. With pytest-xdist, a launch file's cases
-are scheduled onto one worker (``pytest_xdist_make_scheduler``).
+are scheduled onto one worker (scheduling.py).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from ros_isolated_test.launch_verdicts import (
+from ros_isolated_test.pytest_plugin.launch_testing_verdicts import (
     ERROR,
     FAILED,
     SKIPPED,
@@ -51,7 +51,7 @@ if TYPE_CHECKING:
     from _pytest._code.code import ExceptionInfo, TerminalRepr, TracebackStyle
 
 #: The name the pytest plugin registers this module under.
-PLUGIN_NAME = "ros_isolated_test.launch_cases"
+PLUGIN_NAME = "ros_isolated_test.launch_testing_cases"
 #: Packages whose pytest items are launch_testing's (launch_testing_ros subclasses them).
 _LAUNCH_PACKAGES = ("launch_testing", "launch_testing_ros")
 
@@ -367,34 +367,3 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Generator[None, A
         else:
             result.append(node)
     report.result = result
-
-
-def launch_scope(nodeid: str) -> str | None:
-    """The file of a launch case's node ID (``file.py::Class.method[...]``), else None.
-
-    No pytest test function or class has a dot in its name; a launch case does (and so do
-    doctests, kept together per file too, which costs nothing).
-    """
-    path, separator, name = nodeid.partition("::")
-    if separator and "::" not in name and "." in name.partition("[")[0]:
-        return path
-    return None
-
-
-@pytest.hookimpl(optionalhook=True)
-def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """Under xdist's load, loadgroup and worksteal: a launch file's cases as one unit of work.
-
-    loadscope and loadfile keep a file on one worker already; ``each`` runs all of it on
-    every worker. Everything else is scheduled one test at a time, as ``load`` does (with
-    loadgroup, ``xdist_group`` groups as ever).
-    """
-    if config.getvalue("dist") not in ("load", "loadgroup", "worksteal"):
-        return None
-    from xdist.scheduler import LoadGroupScheduling  # type: ignore[import-untyped]
-
-    class LaunchFilesTogether(LoadGroupScheduling):  # type: ignore[misc]
-        def _split_scope(self, nodeid: str) -> str:
-            return launch_scope(nodeid) or super()._split_scope(nodeid)
-
-    return LaunchFilesTogether(config, log)

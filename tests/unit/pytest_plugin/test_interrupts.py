@@ -1,12 +1,12 @@
-"""``pytest_plugin``'s release: what the tests left running is ended before the ID goes.
+"""``interrupts``: a signal ends a pytest session as Ctrl-C does, and its leftovers still end.
 
-The runner's order, in a pytest session: a daemon a test left behind is ended, then the
-ID (or, isolation disabled, the resources) is released, so the next session gets it only
-then (the order of events, never a time). A signal (SIGTERM, SIGHUP: ctest's or colcon's
-timeout, a CI cancel) ends pytest as Ctrl-C does, the sweep runs, and a second signal
-cannot cut it short. Under xdist the controller passes the signal on to its workers and
-waits for them; a worker whose controller was killed still sweeps and releases. Controls:
-Ctrl-C with xdist, SIGTERM without; status shows each ID held while the tests run.
+SIGTERM or SIGHUP (ctest's or colcon's timeout, a CI cancel) ends pytest as Ctrl-C does,
+the sweep runs, and a second signal cannot cut it short; a test that swallows the
+interrupt does not keep the session going. Under xdist the controller
+passes the signal on to its workers and waits for them; a worker whose controller was
+killed still sweeps and releases. Controls: Ctrl-C with xdist, SIGTERM without; status
+shows each ID held while the tests run. The release's order without a signal is
+test_holding_release.py's.
 """
 
 from __future__ import annotations
@@ -23,89 +23,13 @@ from pathlib import Path
 import pytest
 from helpers.commands import CLI, HUNG
 from helpers.processes import carrying, poll_until, wait_for
-from helpers.pytest_sessions import project, run_in, run_pytest, start_pytest
-
-#: Leaves a double-forked daemon behind that notes its end in EVENTS, then waits for GO.
-LEAKING_TEST = """\
-import os, pathlib, signal, sys, time
-
-def test_leaks_a_daemon():
-    events, pid_file, go = (os.environ[n] for n in ("EVENTS", "PID_FILE", "GO"))
-    if os.fork() == 0:
-        os.setsid()
-        if os.fork() == 0:
-            def ended(signum, frame):
-                with open(events, "a") as out:
-                    out.write("daemon ended\\n")
-                os._exit(0)
-            signal.signal(signal.SIGTERM, ended)
-            pathlib.Path(pid_file).write_text(str(os.getpid()))
-            time.sleep(120)
-        os._exit(0)
-    deadline = time.monotonic() + 120
-    while not os.path.exists(go) and time.monotonic() < deadline:
-        time.sleep(0.05)
-"""
-
-
-#: The next session's test: notes that it ran, and on which ID.
-NEXT_TEST = """\
-import os
-
-def test_runs_next():
-    with open(os.environ["EVENTS"], "a") as out:
-        out.write(f"next test on {os.environ['ROS_DOMAIN_ID']}\\n")
-"""
-
-
-#: The next session's test with isolation disabled: notes that it ran (it has no ID).
-NEXT_TEST_WITHOUT_ID = """\
-import os
-
-def test_runs_next():
-    with open(os.environ["EVENTS"], "a") as out:
-        out.write("next test\\n")
-"""
-
-
-@pytest.mark.parametrize("disabled", [False, True], ids=["id", "isolation-disabled-gpu"])
-def test_a_leftover_daemon_is_ended_before_the_id_or_the_resources_are_released(
-    tmp_path: Path,
-    one_id: dict[str, str],
-    started: list[subprocess.Popen[bytes]],
-    disabled: bool,
-) -> None:
-    """Order of events: the daemon ends, then the next session gets the pool's one ID, or
-    (isolation disabled) the one GPU both sessions ask for."""
-    events, pid_file, go = tmp_path / "events", tmp_path / "daemon.pid", tmp_path / "go"
-    shared = {**one_id, "EVENTS": str(events), "PID_FILE": str(pid_file), "GO": str(go)}
-    domain = one_id["ROS_ISOLATED_TEST_DOMAINS"]
-    leaking = project(tmp_path / "leaking", LEAKING_TEST)
-    if disabled:
-        shared.update(DISABLE_ROS_ISOLATION="1", ROS_ISOLATED_TEST_CAPACITY="gpu=1")
-        following = project(tmp_path / "following", NEXT_TEST_WITHOUT_ID)
-        for root in (leaking, following):
-            (root / "pytest.ini").write_text("[pytest]\nros_isolated_test_resources = gpu=1\n")
-        waiting, next_event = "waiting for gpu=1", "next test"
-    else:
-        following = project(tmp_path / "following", NEXT_TEST)
-        waiting, next_event = "waiting for a free ROS_DOMAIN_ID", f"next test on {domain}"
-    first = start_pytest(leaking, shared, tmp_path / "first.log", started)
-    wait_for(pid_file)
-    second = start_pytest(following, shared, tmp_path / "second.log", started)
-    poll_until(
-        lambda: waiting in (tmp_path / "second.log").read_text(),
-        f"the second session queued: {waiting}",
-    )
-    go.touch()
-    assert first.wait(HUNG) == 0, (tmp_path / "first.log").read_text()
-    assert second.wait(HUNG) == 0, (tmp_path / "second.log").read_text()
-    assert events.read_text().splitlines() == ["daemon ended", next_event]
-    daemon = int(pid_file.read_text())
-    log = (tmp_path / "first.log").read_text()
-    assert f"stopped process {daemon}" in log, log
-    assert not Path(f"/proc/{daemon}").exists()
-
+from helpers.pytest_sessions import (
+    NEXT_TEST,
+    project,
+    run_in,
+    run_pytest,
+    start_pytest,
+)
 
 #: Forks a child without exec (it inherits everything, the lock too) that ignores SIGTERM.
 FORKING_TEST = """\
@@ -155,6 +79,52 @@ def test_a_signal_ends_the_tests_leftovers_before_the_release(
     following = project(tmp_path / "following", NEXT_TEST)
     after = run_pytest(following, {**shared, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}, "test")
     assert after.returncode == 0, after.stdout + after.stderr
+
+
+#: The first test swallows the interrupt (as launch_pytest's wait for its launch does: its
+#: KeyboardInterrupt becomes an AttributeError); the second notes that it ran.
+SWALLOWING_TEST = """\
+import os, pathlib, time
+
+def test_swallows_the_interrupt():
+    pathlib.Path(os.environ["READY"]).touch()
+    try:
+        time.sleep(300)
+    except KeyboardInterrupt:
+        pass
+
+def test_runs_next():
+    pathlib.Path(os.environ["NEXT"]).touch()
+"""
+
+
+@pytest.mark.parametrize("signum", [15, None], ids=["sigterm", "no-signal"])
+def test_a_swallowed_signal_still_ends_the_session(
+    tmp_path: Path,
+    env: dict[str, str],
+    one_id: dict[str, str],
+    started: list[subprocess.Popen[bytes]],
+    signum: int | None,
+) -> None:
+    """SIGTERM once (a ctest or colcon timeout), caught by a test: no later test runs and
+    pytest exits 2, never a pass. The control: no signal, the swallowing test ends by
+    itself (GO) and the next test runs."""
+    ready, following = tmp_path / "ready", tmp_path / "next"
+    shared = {**one_id, "READY": str(ready), "NEXT": str(following)}
+    if signum is None:  # the control: the sleep ends by itself, early
+        test = SWALLOWING_TEST.replace("time.sleep(300)", "time.sleep(0)")
+    else:
+        test = SWALLOWING_TEST
+    log = tmp_path / "pytest.log"
+    session = start_pytest(project(tmp_path / "pkg", test), shared, log, started)
+    wait_for(ready)
+    if signum is not None:
+        session.send_signal(signum)
+        assert session.wait(HUNG) == pytest.ExitCode.INTERRUPTED, log.read_text()
+        assert not following.exists(), log.read_text()
+    else:
+        assert session.wait(HUNG) == pytest.ExitCode.OK, log.read_text()
+        assert following.exists(), log.read_text()
 
 
 # --- a signal to the xdist controller, or the controller killed ----------------------------------

@@ -1,13 +1,13 @@
-"""``pytest_plugin``: each pytest session on a domain ID of its own, as the runner decides.
+"""``holding``: each pytest session on a domain ID of its own, as the runner decides.
 
 Real pytest processes with the installed plugin (entry point ``ros_isolated_test``) on a
 project of their own (helpers/pytest_sessions.py): a preset ROS_DOMAIN_ID or Gazebo
 partition is refused when isolation is asked for and left alone (said so) when it is
 automatic; DISABLE_ROS_ISOLATION and a runner of ours around pytest are respected; a pool
-with no free ID waits, then fails with the runner's exit code; os.environ is restored
-after the session; and the plugin costs nothing where it is not active. Each refusal has
-its control. The rules that turn the plugin on are test_plugin_options.py's; xdist,
-resources, the release and real crosstalk have topic files beside this one.
+with no free ID waits, then fails with the plugin's exit code; os.environ is restored
+after the session. Each refusal has its control. The rules that turn the plugin on are
+test_options.py's, what the plugin costs where it is not active test_plugin.py's; xdist,
+resources and the release have topic files beside this one, signals test_interrupts.py.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from helpers.commands import CLI, HUNG
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     PYTEST,
     header_lines,
     hold_the_one_id,
@@ -104,7 +105,7 @@ def test_a_mark_for_another_id_is_no_runner(tmp_path: Path, plain_env: dict[str,
     assert "refusing to run" in done.stderr
 
 
-# --- the pool, the session's end, the import cost ------------------------------------------------
+# --- the pool, the session's end -----------------------------------------------------------------
 
 
 def test_pool_exhausted_waits_then_fails(
@@ -113,18 +114,35 @@ def test_pool_exhausted_waits_then_fails(
     one_id: dict[str, str],
     started: list[subprocess.Popen[bytes]],
 ) -> None:
+    """Exit 75, the plugin's own code: pytest's 3 would say pytest itself broke."""
     root = project(tmp_path / "pkg")
     holder = hold_the_one_id(tmp_path, exhausted_env, started)
     done = run_pytest(root, exhausted_env, "test")
-    assert done.returncode == 3, done.stdout + done.stderr
+    assert done.returncode == NO_ID_EXIT, done.stdout + done.stderr
+    assert NO_ID_EXIT not in set(pytest.ExitCode)
     assert "waiting for a free ROS_DOMAIN_ID" in done.stderr
     assert "after waiting 1 s, no free ROS_DOMAIN_ID" in done.stderr
+    assert "INTERNALERROR" not in done.stdout + done.stderr
     assert not (tmp_path / "record.json").exists()
     holder.terminate()  # the runner ends its test, then releases the ID
     holder.wait(HUNG)
     again = run_pytest(root, exhausted_env, "test")  # the control: the ID free, the same run passes
     assert again.returncode == 0, again.stdout + again.stderr
     assert recorded(tmp_path)["ROS_DOMAIN_ID"] == one_id["ROS_ISOLATED_TEST_DOMAINS"]
+
+
+def test_control_pytests_own_internal_error_keeps_its_3_under_the_plugin(
+    tmp_path: Path, plain_env: dict[str, str]
+) -> None:
+    """The control for the plugin's own code: pytest's 3 means pytest broke, and still does."""
+    root = project(tmp_path / "pkg")
+    hook = "def pytest_collection_modifyitems():\n    raise RuntimeError('a broken hook')\n"
+    (root / "conftest.py").write_text(hook)
+    done = run_pytest(root, plain_env, "test")
+    output = done.stdout + done.stderr
+    assert done.returncode == pytest.ExitCode.INTERNAL_ERROR, output
+    assert "INTERNALERROR> RuntimeError: a broken hook" in output, output
+    assert "ros-isolated-test: ROS_DOMAIN_ID" in done.stdout, output  # isolated meanwhile
 
 
 #: Two pytest sessions in one process (an embedding program).
@@ -161,25 +179,6 @@ def test_os_environ_is_restored_after_the_session(
     starts = f"ros-isolated-test: ROS_DOMAIN_ID {domain},"
     assert sum(line.startswith(starts) for line in header_lines(done.stdout)) == 2
     assert "held by the runner" not in done.stdout
-
-
-def test_inactive_plugin_imports_nothing_of_the_runner(tmp_path: Path, env: dict[str, str]) -> None:
-    """Loaded by every pytest run: outside a ROS package it must cost nothing."""
-    check = """\
-import sys
-
-def test_modules():
-    heavy = ("lxml", "filelock", "ros_isolated_test.runner", "ros_isolated_test.domain_coordinator")
-    assert "ros_isolated_test.pytest_plugin" in sys.modules
-    loaded = [name for name in sys.modules if name.startswith(heavy)]
-    assert loaded == [], loaded
-"""
-    root = project(tmp_path / "plain", check, package=False)
-    done = run_pytest(root, env, "test")
-    assert done.returncode == 0, done.stdout + done.stderr
-    active = run_pytest(project(tmp_path / "ros", check), env, "test")  # the control
-    assert active.returncode == 1, active.stdout
-    assert "ros_isolated_test.runner" in active.stdout
 
 
 # --- a Gazebo transport partition of the session's own -------------------------------------------

@@ -1,4 +1,5 @@
-"""``launch_cases`` through colcon and ctest: each case a result, each package on its own ID.
+"""``launch_testing_cases`` through colcon and ctest: each case a result, each package on its
+own ID.
 
 Two ament_python packages of launch files tested at once by real colcon: each
 ``unittest`` case of a launch file is a result of its own in pytest's result file (and in

@@ -1,4 +1,4 @@
-"""``launch_cases``: launch files under pytest, reported case by case (issue 24).
+"""``launch_testing_cases``: launch_testing files under pytest, reported case by case (issue 24).
 
 launch_testing's own pytest plugin reports a launch file as one test; under ours, each
 ``unittest`` case of it is a result of its own, the launch run once per file (per
@@ -10,9 +10,9 @@ own pytest, since what it checks is the plugin's reading of launch_testing, whic
 version here differs in; its positive control is the stand-in shaped as expected, split
 case by case. The rerun runs real launch_testing (the outside tier's vendored Jazzy
 sources, in the launch environment of helpers/launch_env.py). Routes through colcon and
-ctest are test_launch_cases_colcon.py's, one pytest -n 2 session of every kind of launch
-file test_launch_cases_xdist.py's; the reading of unittest's records is
-test_launch_verdicts.py's.
+ctest are tests/e2e/test_launch_testing_colcon.py's, one pytest -n 2 session of every
+kind of launch file test_launch_testing_cases_xdist.py's; the reading of unittest's
+records is test_launch_testing_verdicts.py's, xdist's unit of work test_scheduling.py's.
 """
 
 from __future__ import annotations
@@ -30,8 +30,6 @@ from helpers.launch_runs import (
     raw_cases,
     run_launches,
 )
-
-from ros_isolated_test.launch_cases import launch_scope
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +102,7 @@ def test_results_that_cannot_be_read_case_by_case_are_one_result_per_launch(
     assert "bad on purpose" in run.output
 
 
-# --- a rerun, and xdist's unit of work -----------------------------------------------------------
+# --- a rerun -------------------------------------------------------------------------------------
 
 
 @pytest.mark.ros
@@ -123,24 +121,3 @@ def test_a_rerun_case_launches_its_file_again(launch_python: Path, tmp_path: Pat
     }, run.output
     assert len(run.launches("flaky")) == 2, run.log
     assert run.returncode == 0, run.output
-
-
-@pytest.mark.parametrize(
-    ("nodeid", "scope"),
-    [
-        ("test/test_x_launch.py::TestWhileRunning.test_talks", "test/test_x_launch.py"),
-        ("test/test_x_launch.py::TestWhileRunning.test_size[red, 1]", "test/test_x_launch.py"),
-        ("test/test_x_launch.py::TestAfterShutdown.test_exit[a.b, 1.5]", "test/test_x_launch.py"),
-        # The controls: pytest's own tests stay units of their own.
-        ("test/test_plain.py::test_plain", None),
-        ("test/test_plain.py::test_plain[1.5]", None),  # a dot among the parameters only
-        ("test/test_plain.py::TestClass::test_method", None),
-        ("test/test_plain.py", None),
-    ],
-)
-def test_launch_scope_keeps_a_launch_files_cases_together_and_nothing_else(
-    nodeid: str, scope: str | None
-) -> None:
-    """xdist's unit of work: a launch case (a dot in its name) is its file's, any other test
-    its own, so launch_cases' scheduler splits everything else as ``load`` does."""
-    assert launch_scope(nodeid) == scope

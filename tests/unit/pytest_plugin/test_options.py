@@ -1,4 +1,4 @@
-"""``plugin_options``: the rules that turn the plugin on, and its options.
+"""``options``: the rules that turn the plugin on, and its options.
 
 On: asked for (``--ros-isolation``, the ``ros_isolation`` ini option in any on word), a
 resource request (outside a ROS package too), or, automatically, inside a ROS package (a
@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pytest
 from helpers.pytest_sessions import (
+    NO_ID_EXIT,
     OFF,
     PACKAGE_XML,
     header_lines,
@@ -32,7 +33,7 @@ from helpers.pytest_sessions import (
     run_pytest,
 )
 
-from ros_isolated_test.plugin_options import RESOURCES_OPTION
+from ros_isolated_test.pytest_plugin.options import RESOURCES_OPTION
 
 # --- the whole plugin: isolated or not -----------------------------------------------------------
 
@@ -97,7 +98,7 @@ def test_options_that_run_no_test_reserve_nothing(
     started: list[subprocess.Popen[bytes]],
     option: str,
 ) -> None:
-    """The pool's one ID held: they still answer at once (a reservation would fail: 3)."""
+    """The pool's one ID held: they still answer at once (a reservation would fail: 75)."""
     root = project(tmp_path / "pkg")
     env = {**plain_env, **one_id, "ROS_ISOLATED_TEST_WAIT_TIMEOUT": "0"}
     hold_the_one_id(tmp_path, env, started)
@@ -105,7 +106,7 @@ def test_options_that_run_no_test_reserve_nothing(
     assert done.returncode == 0, done.stdout + done.stderr
     assert "no free ROS_DOMAIN_ID" not in done.stderr
     control = run_pytest(root, env, "test")
-    assert control.returncode == 3, control.stdout + control.stderr
+    assert control.returncode == NO_ID_EXIT, control.stdout + control.stderr
 
 
 @pytest.mark.parametrize("package", [True, False])
@@ -132,15 +133,15 @@ def test_the_option_wins_over_the_ini_and_turns_isolation_on(
 PROBE = """\
 import json, os
 import pytest
-from ros_isolated_test import plugin_options
+from ros_isolated_test.pytest_plugin import options
 
 def pytest_addoption(parser):
-    plugin_options.add(parser)
+    options.add(parser)
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config):
-    record = {"decided": plugin_options.decide(config),
-              "resources": list(plugin_options.resources(config))}
+    record = {"decided": options.decide(config),
+              "resources": list(options.resources(config))}
     with open(os.environ["DECIDED"], "w") as out:
         json.dump(record, out)
 """
