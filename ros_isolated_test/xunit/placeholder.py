@@ -29,8 +29,16 @@ if TYPE_CHECKING:
 NOT_WRITTEN = "ros-isolated-test could not write this result file"
 #: Bytes the placeholder holds beyond its own content, so the stand-in always fits.
 RESERVE_BYTES = 1024
-#: Properties the stand-in keeps while they fit: how the test ended, and on which ID.
-_STAND_IN_PROPERTIES = ("exit", "exit_code", "signal", "duration", "ros_domain_id")
+#: Properties the stand-in keeps while they fit: how the test ended, on which ID, and
+#: where the test's own file is kept.
+_STAND_IN_PROPERTIES = (
+    "exit",
+    "exit_code",
+    "signal",
+    "duration",
+    "ros_domain_id",
+    "original_result_file",
+)
 
 
 def with_room(data: bytes) -> bytes:
