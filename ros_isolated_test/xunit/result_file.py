@@ -371,7 +371,7 @@ class ResultFile:
 
         The test's own file, if kept aside, is still at the path (a directory moved
         aside goes back): its word is the best one left. Else our placeholder, if still
-        there, is overwritten by the stand-in.
+        there, is overwritten by the stand-in, beside the earlier attempts it holds.
         """
         assert self.path is not None and self.original is not None
         if self._adopted and not self._beside:
@@ -391,6 +391,7 @@ class ResultFile:
             self.write_error or self._failure,
             self.properties,
             cases,
+            self._attempts,  # those the placeholder stands beside, in a rerun series
         )
         try:
             left = placeholder.overwrite_in_place(self.path, self.placeholder, stand_in)
