@@ -423,7 +423,8 @@ class ResultFile:
         assert self.path is not None and self.original is not None
         beside = self.own is not None and os.path.lexists(self.own)
         source = self.own if beside and self.own is not None else self.path
-        cases, read = read_cases(source, self.package, self.test_name)
+        # Named as the result path, which the test was told it writes (not as ``own``).
+        cases, read = read_cases(source, self.package, self.test_name, self.path)
         self.problems = read.problems + read.repairs
         if read.repairs:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)
