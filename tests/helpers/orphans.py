@@ -18,7 +18,13 @@ import pytest
 from helpers.processes import DEADLINE, wait_for
 
 #: A test that lives until killed; on SIGUSR1 it writes "alive" to the file named by $0.
-ANSWERS_USR1 = "trap 'echo alive > \"$0\"' USR1; while :; do sleep 0.05; done"
+#: It writes "$0.ready" once the trap is set: a SIGUSR1 before would end it.
+ANSWERS_USR1 = 'trap \'echo alive > "$0"\' USR1; : > "$0.ready"; while :; do sleep 0.05; done'
+
+
+def ready(answer: Path) -> None:
+    """Wait until the test running :data:`ANSWERS_USR1` for ``answer`` can answer."""
+    wait_for(answer.with_name(f"{answer.name}.ready"))
 
 
 def watch(pid: int) -> int:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.orphans import ANSWERS_USR1, lives_on, wait_ended, watch
+from helpers.orphans import ANSWERS_USR1, lives_on, ready, wait_ended, watch
 from helpers.processes import DEADLINE, Children
 
 from ros_isolated_test.process import fork_exec
@@ -48,6 +48,7 @@ def test_a_test_dies_with_its_runner_killed_alone(
     runner = children.python(RUNNER, mode, ANSWERS_USR1, answer)
     pid = int(children.first_line(runner))
     pidfd = watch(pid)
+    ready(answer)
     runner.kill()
     runner.wait(timeout=DEADLINE)
     if mode != "threads":
