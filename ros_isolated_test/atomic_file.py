@@ -12,6 +12,8 @@ import os
 import stat
 from pathlib import Path
 
+TYPE_CHECKING = False
+
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
 #: The null device's number on Linux (1:3), wherever its node lies (a container's /dev).
 _NULL_DEVICE = os.makedev(1, 3)
@@ -89,9 +91,10 @@ def write_atomically(
 
     The folder is created if missing. ``mode`` is set explicitly, whatever the umask.
     A device node, FIFO or socket at ``path`` (or a symlink to one) is never replaced:
-    :class:`NotReplaceableError`, checked before the temporary file is made and again
-    just before the rename, so one that appeared meanwhile is kept too. ``replacing``:
-    the one such node (its ``lstat``) that may go, the test's own, kept elsewhere.
+    :class:`NotReplaceableError`, checked before the temporary file is made, and decided
+    again by what the rename itself took away (:func:`_rename_in`), so one that appeared
+    at any instant before is kept too. ``replacing``: the one such node (its ``lstat``)
+    that may go, the test's own, kept elsewhere.
     """
     _check(path, replacing)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -109,9 +112,111 @@ def write_atomically(
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             os.fchmod(handle.fileno(), mode)
-        _check(path, replacing)
-        os.replace(temp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp)
+        _rename_in(temp, path, replacing)
+    except BaseException as error:
+        if not isinstance(error, _LeftAtTemporary):
+            with contextlib.suppress(OSError):
+                os.unlink(temp)
         raise
+
+
+# --- the rename: never over a special file, not even one that appeared after every check ----
+
+_AT_FDCWD = -100
+_RENAME_NOREPLACE = 1
+_RENAME_EXCHANGE = 2
+#: renameat2's answers where the kernel or the file system cannot do a flag (NFS, old
+#: kernels): then a check just before a plain rename, a window of microseconds.
+_UNSUPPORTED = (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP)
+
+
+class _LeftAtTemporary(OSError):
+    """A special file swapped out could not be put back: it is at the temporary name."""
+
+
+def _rename_in(temp: Path, path: Path, replacing: os.stat_result | None) -> None:
+    """Put ``temp`` at ``path``, deciding by what is really there as the rename happens.
+
+    renameat2(2): ``RENAME_EXCHANGE`` swaps the two names in one step, so what was at
+    ``path`` is then at ``temp``, untouched; a special file (or a directory) is swapped
+    back at once, anything else is unlinked, as a rename would have dropped it. Nothing at
+    ``path``: ``RENAME_NOREPLACE``, which fails if something appeared meanwhile (then
+    looked at again). Where renameat2 cannot (an old C library or kernel, a file system
+    without these flags): a check just before a plain rename.
+    """
+    call = _renameat2()
+    source, target = os.fsencode(temp), os.fsencode(path)
+    for _attempt in range(100):
+        if call is None:
+            break
+        if call(_AT_FDCWD, source, _AT_FDCWD, target, _RENAME_EXCHANGE) == 0:
+            _drop_or_put_back(temp, path, replacing, call)
+            return
+        number = _errno()
+        if number == errno.ENOENT:
+            if call(_AT_FDCWD, source, _AT_FDCWD, target, _RENAME_NOREPLACE) == 0:
+                return
+            number = _errno()
+            if number == errno.EEXIST:
+                continue  # something appeared at the path: swap and look at it
+        if number in _UNSUPPORTED:
+            break
+        raise OSError(number, os.strerror(number), str(path))
+    else:
+        raise FileExistsError(errno.EEXIST, "the path keeps changing", str(path))
+    _check(path, replacing)
+    os.replace(temp, path)
+
+
+def _drop_or_put_back(
+    temp: Path, path: Path, replacing: os.stat_result | None, call: _Renameat2
+) -> None:
+    """``temp`` holds what was at ``path``: unlink it, or swap a special file back."""
+    old = os.lstat(temp)
+    kind = "a directory" if stat.S_ISDIR(old.st_mode) else special_kind(temp)
+    mine = replacing is not None and (old.st_dev, old.st_ino) == (
+        replacing.st_dev,
+        replacing.st_ino,
+    )
+    if kind is None or (mine and kind != "a directory"):
+        os.unlink(temp)
+        return
+    if call(_AT_FDCWD, os.fsencode(temp), _AT_FDCWD, os.fsencode(path), _RENAME_EXCHANGE):
+        number = _errno()
+        raise _LeftAtTemporary(
+            number, f"{kind} was at the path and could not be put back from {temp}", str(path)
+        )
+    if kind == "a directory":
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
+    raise NotReplaceableError(path, kind)
+
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    _Renameat2 = Callable[[int, bytes, int, bytes, int], int]
+
+_RENAMEAT2: list[_Renameat2 | None] = []
+
+
+def _renameat2() -> _Renameat2 | None:
+    """The C library's renameat2, bound once; None where it has none (glibc before 2.28)."""
+    if not _RENAMEAT2:
+        import ctypes
+
+        try:
+            function = ctypes.CDLL(None, use_errno=True).renameat2
+        except (OSError, AttributeError):
+            _RENAMEAT2.append(None)
+        else:
+            text, number = ctypes.c_char_p, ctypes.c_int
+            function.argtypes = [number, text, number, text, ctypes.c_uint]
+            function.restype = ctypes.c_int
+            _RENAMEAT2.append(function)
+    return _RENAMEAT2[0]
+
+
+def _errno() -> int:
+    import ctypes
+
+    return ctypes.get_errno()

@@ -13,9 +13,10 @@ file, a Unix socket bound to a path and a signal still reach it.
 
 Done with ``unshare(2)``, ``mount(2)`` and one ``ioctl(SIOCSIFFLAGS)`` through ctypes,
 which the reaper has loaded already: no helper program, no second interpreter. The
-supervisor forks (it is single-threaded), the child unshares and waits while the
-runner, still outside, writes its ID maps (only a process in the parent namespace may
-map more than its own ID); the child then mounts, brings loopback up and execs the test.
+supervisor forks (``fork_exec``: it is single-threaded), the child unshares and waits
+while the runner, still outside, writes its ID maps (only a process in the parent
+namespace may map more than its own ID); the child then mounts, brings loopback up and
+execs the test, tethered to the runner as in domain mode.
 
 No PID namespace: its first process would be init there, which ignores SIGTERM unless
 it handles it, so a timeout's SIGTERM would no longer end a plain test; and the
@@ -28,16 +29,27 @@ behind the refusal and with its fix, is ``namespace_diagnosis``.
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import os
 import signal
 import sys
 
+from ros_isolated_test.process.fork_exec import (
+    HELD_BACK,
+    Exec,
+    fork,
+    read_all,
+    reap,
+    report,
+    threads,
+)
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Iterable, Mapping, Sequence
     from typing import NoReturn
+
+    from ros_isolated_test.process.fork_exec import Mask
 
 CLONE_NEWNS = 0x00020000
 CLONE_NEWIPC = 0x08000000
@@ -58,9 +70,6 @@ LOOPBACK_FLAGS = 0x1 | 0x8 | 0x1000  # IFF_UP | IFF_LOOPBACK | IFF_MULTICAST
 SHM = "/dev/shm"
 #: ``capset(2)``'s header version for 64-bit capability sets.
 _CAPABILITY_VERSION_3 = 0x20080522
-#: Held back in a forked child until it execs (or exits): the signals the runner passes
-#: on, whose Python handlers the child inherits and must never run.
-HELD_BACK = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 #: What each step does, for messages: "cannot <this>: <strerror>".
 STEPS = {
@@ -188,14 +197,6 @@ def write_maps(pid: int) -> None:
             _write(base + kind, f"{own} {own} 1")
 
 
-def _report(fd: int, error: BaseException) -> None:
-    """A failed step, as the child tells it: ``<step> <errno>``."""
-    step = getattr(error, "step", "exec")
-    number = getattr(error, "errno", None) or errno.EPERM
-    with contextlib.suppress(OSError):
-        os.write(fd, f"{step} {number}\n".encode("ascii"))
-
-
 def _failure(report: bytes) -> NamespaceError:
     """What the child reported back, as the error it describes."""
     words = report.split()
@@ -205,55 +206,7 @@ def _failure(report: bytes) -> NamespaceError:
         return NamespaceError("unshare", errno.EIO)
 
 
-def _read_all(fd: int) -> bytes:
-    data = b""
-    while chunk := os.read(fd, 4096):
-        data += chunk
-    return data
-
-
-class _Exec:
-    """What the child execs once inside: ``execve`` on each candidate, as execvp would."""
-
-    __slots__ = ("argv", "candidates", "defaults", "env", "mask", "output_fd")
-
-    def __init__(
-        self,
-        candidates: Sequence[str],
-        argv: Sequence[str],
-        env: Mapping[str, str],
-        output_fd: int,
-        defaults: Iterable[int],
-    ) -> None:
-        self.candidates = list(candidates)
-        self.argv = list(argv)
-        self.env = dict(env)
-        self.output_fd = output_fd
-        self.defaults = tuple(defaults)
-        self.mask: set[int | signal.Signals] = set()
-
-    def run(self) -> NoReturn:
-        """Never returns: execs the test, or raises the error posix_spawn would have."""
-        os.dup2(self.output_fd, 1)
-        os.dup2(self.output_fd, 2)
-        for signum in self.defaults:
-            signal.signal(signum, signal.SIG_DFL)
-        # Unblocked only now, with default actions: a signal the runner passed on while
-        # the child was being set up ends it as it would end the test.
-        signal.pthread_sigmask(signal.SIG_SETMASK, self.mask)
-        kept: OSError | None = None
-        last: OSError | None = None
-        for path in self.candidates:
-            try:
-                os.execve(path, self.argv, self.env)
-            except OSError as error:
-                last = error
-                if kept is None and error.errno not in (errno.ENOENT, errno.ENOTDIR):
-                    kept = error
-        raise kept or last or FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT))
-
-
-def _child(lib: _Libc, report_w: int, go_r: int, shm: bool, plan: _Exec | None) -> NoReturn:
+def _child(lib: _Libc, report_w: int, go_r: int, shm: bool, plan: Exec | None) -> NoReturn:
     """The forked child: unshare, wait for the maps, set up, exec (or, probing, exit 0)."""
     try:
         if lib.unshare(FLAGS) != 0:
@@ -266,29 +219,28 @@ def _child(lib: _Libc, report_w: int, go_r: int, shm: bool, plan: _Exec | None) 
             os._exit(0)
         plan.run()
     except BaseException as error:  # never back into the runner's code
-        _report(report_w, error)
+        report(report_w, error)
     os._exit(127)
 
 
-def _fork(lib: _Libc, shm: bool, plan: _Exec | None) -> tuple[int, int, int]:
+def _fork(lib: _Libc, shm: bool, plan: Exec | None) -> tuple[int, int, int]:
     """Fork the child, :data:`HELD_BACK` blocked in it; (pid, report_r, go_w)."""
     report_r, report_w = os.pipe()
     go_r, go_w = os.pipe()
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_BACK)
-    try:
-        pid = os.fork()
-    except BaseException:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        for fd in (report_r, report_w, go_r, go_w):
-            os.close(fd)
-        raise
-    if pid == 0:  # pragma: no cover (the child: reports through the pipe, never returns)
+
+    def child(mask: Mask) -> NoReturn:  # pragma: no cover (reports through the pipe)
         if plan is not None:
             plan.mask = mask
         os.close(report_r)
         os.close(go_w)
         _child(lib, report_w, go_r, shm, plan)
-    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+    try:
+        pid = fork(child)
+    except BaseException:
+        for fd in (report_r, report_w, go_r, go_w):
+            os.close(fd)
+        raise
     os.close(report_w)
     os.close(go_r)
     return pid, report_r, go_w
@@ -301,28 +253,20 @@ def _hand_over(pid: int, report_r: int, go_w: int) -> bytes:
         if first != b"U":
             os.close(go_w)
             go_w = -1
-            return first + _read_all(report_r) if first else b""
+            return first + read_all(report_r) if first else b""
         try:
             write_maps(pid)
         except OSError as error:
             os.close(go_w)
             go_w = -1
-            _read_all(report_r)
+            read_all(report_r)
             return f"map {error.errno or errno.EPERM}\n".encode("ascii")
         os.write(go_w, b"G")
-        return _read_all(report_r)
+        return read_all(report_r)
     finally:
         if go_w >= 0:
             os.close(go_w)
         os.close(report_r)
-
-
-def _reap(pid: int) -> int:
-    """The child's wait status, once it has ended (EINTR retried by os.waitpid)."""
-    try:
-        return os.waitpid(pid, 0)[1]
-    except ChildProcessError:
-        return 0  # reaped by an embedding program's handler: its report says enough
 
 
 def spawn(
@@ -342,13 +286,13 @@ def spawn(
     they would on the test. Raises :class:`NamespaceError` when a step of the set-up fails.
     """
     lib = _libc()
-    plan = _Exec(candidates, argv, env, output_fd, (*defaults, *HELD_BACK))
+    plan = Exec(candidates, argv, env, output_fd, (*defaults, *HELD_BACK))
     pid, report_r, go_w = _fork(lib, os.path.isdir(SHM), plan)
-    report = _hand_over(pid, report_r, go_w)
-    if not report:
+    said = _hand_over(pid, report_r, go_w)
+    if not said:
         return pid
-    _reap(pid)
-    error = _failure(report)
+    reap(pid)
+    error = _failure(said)
     if error.step == "exec":
         raise OSError(error.errno, os.strerror(error.errno or errno.EIO), name)
     raise error
@@ -365,17 +309,17 @@ def try_in_child() -> NamespaceError | None:
         pid, report_r, go_w = _fork(lib, os.path.isdir(SHM), None)
     except OSError as error:
         return NamespaceError("unshare", error.errno or errno.EPERM)
-    report = _hand_over(pid, report_r, go_w)
-    status = _reap(pid)
-    if report:
-        return _failure(report)
+    said = _hand_over(pid, report_r, go_w)
+    status = reap(pid)
+    if said:
+        return _failure(said)
     if os.WIFEXITED(status) and os.WEXITSTATUS(status) != 0:
         return NamespaceError("unshare", errno.EPERM)
     return None
 
 
 def _status(field: str) -> str | None:
-    """A field of /proc/self/status (``Threads``, ``CapEff``); None where /proc cannot say."""
+    """A field of /proc/self/status (``CapEff``); None where /proc cannot say."""
     try:
         with open("/proc/self/status", encoding="ascii", errors="replace") as handle:
             for line in handle:
@@ -384,12 +328,6 @@ def _status(field: str) -> str | None:
     except (OSError, IndexError):
         pass
     return None
-
-
-def threads() -> int:
-    """How many threads this process runs (1 where /proc cannot say)."""
-    found = _status("Threads")
-    return int(found) if found is not None and found.isdigit() else 1
 
 
 def enter_here() -> None:
@@ -432,7 +370,7 @@ def enter_here() -> None:
         os.write(ready_w, b"U")
         os.close(ready_w)
         ready_w = -1
-        answer = _read_all(done_r)
+        answer = read_all(done_r)
         if answer != b"M":
             raise _failure(answer)
         _inside(lib, os.path.isdir(SHM))
@@ -442,7 +380,7 @@ def enter_here() -> None:
         if ready_w >= 0:
             os.close(ready_w)
         os.close(done_r)
-        _reap(helper)
+        reap(helper)
 
 
 #: CAP_SETGID's bit in a capability set: what maps supplementary groups (:func:`write_maps`).

@@ -15,6 +15,8 @@ import signal
 import time
 from collections.abc import Iterator, Mapping, Sequence
 
+from ros_isolated_test.process import fork_exec
+
 #: The exit code a test gets when its status was reaped by someone else: a failure.
 STATUS_LOST = 255
 #: Reset to their default in the test: Python ignores SIGPIPE, and so would the test.
@@ -24,10 +26,11 @@ _DEFAULT_IN_TEST = (signal.SIGPIPE, signal.SIGXFSZ)
 class Test:
     """The test's main process and the read end of its output pipe.
 
-    Started with ``posix_spawn``, not ``subprocess``: the one call the runner needs
-    does not pay for importing subprocess (and threading, selectors) on every test.
-    It is started as Popen would start it: found on the test's own PATH, with
-    SIGPIPE at its default, without the runner's other descriptors.
+    Started by a fork and an exec (``fork_exec``), or ``posix_spawn``, not ``subprocess``:
+    the runner does not pay for importing subprocess (and threading, selectors) on every
+    test. It is started as Popen would start it: found on the test's own PATH, with
+    SIGPIPE at its default, without the runner's other descriptors; and it dies with the
+    runner.
     """
 
     def __init__(
@@ -85,9 +88,11 @@ def _spawn(
     """Start ``command`` with ``output_fd`` as its stdout and stderr; its PID.
 
     Each match on the test's PATH is tried in turn, as execvp does: a script whose
-    interpreter is missing (ENOENT) gives way to the next match. With ``namespaces`` the
-    test starts in namespaces of its own (``namespace.spawn``: a fork, as posix_spawn
-    cannot unshare), with the same descriptors and signals.
+    interpreter is missing (ENOENT) gives way to the next match. The test is tethered to
+    the runner (``fork_exec``: it dies when the runner dies), which posix_spawn cannot
+    do; only a runner that runs threads uses posix_spawn. With ``namespaces`` the test
+    starts in namespaces of its own (``namespace.spawn``), with the same descriptors and
+    signals.
     """
     name = command[0]
     if os.sep in name:
@@ -101,6 +106,9 @@ def _spawn(
         from ros_isolated_test.process import namespace
 
         return namespace.spawn(name, candidates, command, env, output_fd, _DEFAULT_IN_TEST)
+    if fork_exec.threads() == 1:
+        return fork_exec.start(name, candidates, command, env, output_fd, _DEFAULT_IN_TEST)
+    # Other threads run (a program embedding the runner): a fork could deadlock the child.
     kept: OSError | None = None
     last: OSError | None = None
     for path in candidates:

@@ -26,19 +26,22 @@ if TYPE_CHECKING:
     from ros_isolated_test.xunit.result_file import ResultFile
 
 
-def command_of(
-    request: RunRequest, config: settings.Settings, result: ResultFile, number: int
-) -> tuple[str, ...]:
-    """The command attempt ``number`` runs: in a rerun series, its own result file goes beside.
+def command_of(request: RunRequest, result: ResultFile, number: int) -> tuple[str, ...]:
+    """The command attempt ``number`` runs: its own result file goes beside the result path.
 
     The result path it names is pointed at ``result.own_file``, so the result path holds
-    the record so far (earlier failures, this attempt not finished) until the runner
-    merges the attempt in: a kill at any moment leaves a failing file.
+    the placeholder (in a rerun series: the record so far) until the runner, the test
+    ended, adopts the attempt: a kill at any moment leaves a failing file, never the
+    test's own "passed". A command that names no argument as the result path writes it
+    itself, as before (``result.in_place``).
     """
-    if not config.reruns:
-        return request.command
     own = result.own_file(number)
-    return request.command if own is None else request.command_writing_to(own)
+    if own is None:
+        return request.command
+    command = request.command_writing_to(own)
+    if command == request.command:
+        result.writes_in_place()
+    return command
 
 
 def attempt(
@@ -56,7 +59,7 @@ def attempt(
     PoolExhaustedError or LockDirError (no ID), CapacityConflictError, RefusedError
     (namespaces that cannot be had), or Interrupted (a signal before it started).
     """
-    command = policy.wrapped(command_of(request, config, result, number))
+    command = policy.wrapped(command_of(request, result, number))
     with isolation(policy, config, command, capture.note) as held:
         domain_id = None if held is None else held.domain_id
         reserved = held is None or held.reserved

@@ -31,12 +31,18 @@ def test_name_of(result_file: Path) -> str:
 
 
 def read_cases(
-    path: Path, package: str | None, test_name: str
+    path: Path, package: str | None, test_name: str, named: Path | None = None
 ) -> tuple[list[Case], raw.ReadResult]:
-    """The canonical cases of any result file, and what reading it found."""
+    """The canonical cases of any result file, and what reading it found.
+
+    ``named``: the path the cases speak of, when the file was read elsewhere (the test
+    wrote it beside the result path, which it stands for).
+    """
     from ros_isolated_test.xunit import normalise, reader
 
     read = reader.read(path)
+    if named is not None:
+        read.path = named
     return normalise.cases_from(read, package, test_name), read
 
 

@@ -17,20 +17,29 @@ import stat
 
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import serialise
+from ros_isolated_test.xunit.model import Suite
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from collections.abc import Sequence
     from pathlib import Path
 
-    from ros_isolated_test.xunit.model import Case, Suite
+    from ros_isolated_test.xunit.model import Case
 
 #: How the stand-in for a result that could not be written begins.
 NOT_WRITTEN = "ros-isolated-test could not write this result file"
 #: Bytes the placeholder holds beyond its own content, so the stand-in always fits.
 RESERVE_BYTES = 1024
-#: Properties the stand-in keeps while they fit: how the test ended, and on which ID.
-_STAND_IN_PROPERTIES = ("exit", "exit_code", "signal", "duration", "ros_domain_id")
+#: Properties the stand-in keeps while they fit: how the test ended, on which ID, and
+#: where the test's own file is kept.
+_STAND_IN_PROPERTIES = (
+    "exit",
+    "exit_code",
+    "signal",
+    "duration",
+    "ros_domain_id",
+    "original_result_file",
+)
 
 
 def with_room(data: bytes) -> bytes:
@@ -68,9 +77,11 @@ class StandIn:
     the case's message and the suite's properties are set here, cut to the room there is.
     ``failure`` is why the write failed, in the system's words; ``reason`` the full
     error; ``properties`` the run's; ``cases`` those the final word would have held.
+    ``earlier``: the suites of a rerun series' earlier attempts, which the placeholder
+    holds: the stand-in keeps their failures too (their properties only while they fit).
     """
 
-    __slots__ = ("_message", "_properties", "_reason", "_suite", "_why")
+    __slots__ = ("_earlier", "_message", "_properties", "_reason", "_suite", "_why")
 
     def __init__(
         self,
@@ -79,6 +90,7 @@ class StandIn:
         reason: str,
         properties: dict[str, str],
         cases: Sequence[Case],
+        earlier: Sequence[Suite] = (),
     ) -> None:
         ended = properties.get("exit")
         if ended == "not run":
@@ -99,32 +111,53 @@ class StandIn:
         self._properties["result_write_error"] = reason
         self._reason = reason
         self._suite = suite
+        self._earlier = tuple(earlier)
 
     def render(self, room: int) -> bytes:
-        """The stand-in in at most ``room`` bytes: properties dropped, then the message cut."""
+        """The stand-in in at most ``room`` bytes: properties dropped, then the message cut.
+
+        The earlier attempts' cases always stay: the placeholder it replaces held them.
+        """
         message = self._message
-        for kept in (self._properties, {"result_write_error": self._reason[:200]}):
-            data = self._rendered(kept, len(message))
+        stages = [(self._properties, self._earlier)]
+        bare = tuple(_without_properties(suite) for suite in self._earlier)
+        if bare:
+            stages.append((self._properties, bare))
+        stages.append(({"result_write_error": self._reason[:200]}, bare))
+        for kept, earlier in stages:
+            data = self._rendered(kept, earlier, len(message))
             if len(data) <= room:
                 return data
         # The longest head of the message that fits (escaping makes bytes unpredictable).
         low, high = len(self._why), len(message)
-        if len(self._rendered(kept, low)) > room:
+        if len(self._rendered(kept, earlier, low)) > room:
             raise OSError(errno.ENOSPC, "no room in the placeholder for the stand-in")
         while low < high:
             middle = (low + high + 1) // 2
-            if len(self._rendered(kept, middle)) <= room:
+            if len(self._rendered(kept, earlier, middle)) <= room:
                 low = middle
             else:
                 high = middle - 1
-        return self._rendered(kept, low)
+        return self._rendered(kept, earlier, low)
 
-    def _rendered(self, properties: dict[str, str], length: int) -> bytes:
+    def _rendered(
+        self, properties: dict[str, str], earlier: tuple[Suite, ...], length: int
+    ) -> bytes:
         (case,) = self._suite.cases
         case.message = case.text = shown(self._message[:length])
         case.type = "ResultNotWritten"
         self._suite.properties = {name: shown(value) for name, value in properties.items()}
-        return serialise.serialize(self._suite)
+        if not earlier:
+            return serialise.serialize(self._suite)
+        from ros_isolated_test.xunit.attempts import merge_attempts
+
+        return serialise.serialize(merge_attempts([*earlier, self._suite]))
+
+
+def _without_properties(suite: Suite) -> Suite:
+    """``suite`` with no properties: merged, it adds no ``attempt_<k>.<name>`` of its own."""
+    return Suite(suite.name, suite.cases, suite.time, suite.timestamp, suite.hostname, {},
+                 suite.system_out, suite.system_err)  # fmt: skip
 
 
 def overwrite_in_place(path: Path, placeholder: bytes, stand_in: StandIn) -> bool:

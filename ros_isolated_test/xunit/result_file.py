@@ -7,11 +7,17 @@ once ``adopt`` made it canonical). A run with reruns adds ``end_attempt`` after 
 attempt's word, ``next_attempt`` before the next one, and ``write_attempts`` for the
 file that holds them all; ``rewrite`` says the final word again with what came since.
 
+The test writes its own file beside the result path (``own_file``), never over the
+placeholder: only the runner, once the test has ended, puts a word of the test's at the
+result path, so a runner killed at any instant never leaves "passed" there unless it
+concluded so. A command that names no argument as the result path writes it itself
+(``in_place``), as before: said in the result.
+
 The final word is always a canonical file at the result path: the test's own file
-normalised (the original kept beside it as ``<name>.orig``, linked there before the
-canonical file replaces it in one rename, so a kill at any instant leaves a file at the
-path), or one written for a test that wrote none. When the final word cannot be written,
-the placeholder is overwritten in place by a stand-in saying so (``placeholder``).
+normalised (the original kept beside it as ``<name>.orig``, linked or moved there before
+the canonical file replaces it in one rename, so a kill at any instant leaves a file at
+the path), or one written for a test that wrote none. When the final word cannot be
+written, the placeholder is overwritten in place by a stand-in saying so (``placeholder``).
 """
 
 from __future__ import annotations
@@ -20,7 +26,6 @@ import contextlib
 import errno
 import os
 import shlex
-import stat
 import sys
 import time
 from pathlib import Path
@@ -35,6 +40,12 @@ from ros_isolated_test.atomic_file import (
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import placeholder, serialise, validate
 from ros_isolated_test.xunit.canonical import read_cases
+from ros_isolated_test.xunit.kept_files import (
+    attempt_original_of,
+    keep_aside,
+    original_of,
+    remove,
+)
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 TYPE_CHECKING = False
@@ -42,7 +53,8 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
 NO_RESULT = "The test did not generate a result file."
-ORIGINAL_SUFFIX = ".orig"
+#: The suite property of a test that wrote the result path itself (``in_place``).
+IN_PLACE_PROPERTY = "result_file_in_place"
 _SPACE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
@@ -84,15 +96,17 @@ class ResultFile:
         self._adopted = False
         self._beside = False
         self._kept: os.stat_result | None = None
-        #: Where the current attempt of a rerun series writes its own file (own_file).
+        #: Where the current attempt writes its own file (own_file).
         self.own: Path | None = None
+        #: The command names no argument as the result path: the test writes it itself.
+        self.in_place = False
         # Why the last write failed, in the system's words (No space left on device).
         self._failure = "the write failed"
 
     @property
     def original(self) -> Path | None:
         """Where the test's own file is kept once its canonical form replaces it."""
-        return None if self.path is None else self.path.with_name(self.path.name + ORIGINAL_SUFFIX)
+        return None if self.path is None else original_of(self.path)
 
     @property
     def attempts_written(self) -> int:
@@ -120,33 +134,34 @@ class ResultFile:
         for stale in (self.path, self.original):
             assert stale is not None
             with contextlib.suppress(FileNotFoundError):
-                _remove(stale)
+                remove(stale)
         number = 1
         # Earlier attempts' own files of a run with reruns: one lstat when there are none.
         while os.path.lexists(stale := self.attempt_original(number)):
-            _remove(stale)
+            remove(stale)
             number += 1
         self.path.parent.mkdir(parents=True, exist_ok=True)
 
     def attempt_original(self, number: int) -> Path:
         """Where the test's own file of attempt ``number`` is kept once a rerun follows."""
         assert self.path is not None
-        return self.path.with_name(f"{self.path.name}.attempt{number}{ORIGINAL_SUFFIX}")
+        return attempt_original_of(self.path, number)
 
     def own_file(self, number: int) -> Path | None:
-        """Where attempt ``number`` of a rerun series writes its own file: beside the result path.
+        """Where attempt ``number`` writes its own file: beside the result path.
 
-        Never the result path itself: there the record so far (the earlier attempts and a
-        case saying this one did not finish) must stay until the runner merges this
-        attempt in, or a kill after a passing attempt wrote its file would leave "passed".
-        None (the result path, as without reruns) when the name cannot be cleared.
+        Never the result path itself: there the placeholder (in a rerun series, the
+        record so far: the earlier attempts and a case saying this one did not finish)
+        must stay until the runner adopts this attempt, or a kill after a passing test
+        wrote its file would leave "passed". Not ``*.xml``, so no glob of results reads
+        it. None (the result path, the old way) when the name cannot be cleared.
         """
-        self.own = None
+        self.own, self.in_place = None, False
         if self.path is None:
             return None
         own = self.attempt_original(number)
         try:
-            _remove(own)  # the test's own leftover: this name is the runner's
+            remove(own)  # the test's own leftover: this name is the runner's
         except OSError as error:
             _say(
                 f"cannot clear {own} ({_reason(error)}), so attempt {number} writes its own "
@@ -155,6 +170,10 @@ class ResultFile:
             return None
         self.own = own
         return own
+
+    def writes_in_place(self) -> None:
+        """The command names no argument as the result path: if the test writes it, there."""
+        self.own, self.in_place = None, True
 
     def end_attempt(self) -> None:
         """The attempt's final word, if it was written, joins those the series merges."""
@@ -352,7 +371,7 @@ class ResultFile:
 
         The test's own file, if kept aside, is still at the path (a directory moved
         aside goes back): its word is the best one left. Else our placeholder, if still
-        there, is overwritten by the stand-in.
+        there, is overwritten by the stand-in, beside the earlier attempts it holds.
         """
         assert self.path is not None and self.original is not None
         if self._adopted and not self._beside:
@@ -372,6 +391,7 @@ class ResultFile:
             self.write_error or self._failure,
             self.properties,
             cases,
+            self._attempts,  # those the placeholder stands beside, in a rerun series
         )
         try:
             left = placeholder.overwrite_in_place(self.path, self.placeholder, stand_in)
@@ -397,23 +417,24 @@ class ResultFile:
         The original is linked (or copied) to ``original`` and stays at the path until
         :meth:`write` renames the canonical file over it: whenever the runner is killed,
         a file is at the path. A directory in its place can only be moved aside whole.
-        A file written to ``own`` (a rerun series) is moved to ``original``: the path
-        holds the record so far meanwhile.
+        A file written to ``own`` is moved to ``original``: the path holds the
+        placeholder (or the record so far) meanwhile.
         """
         assert self.path is not None and self.original is not None
         beside = self.own is not None and os.path.lexists(self.own)
         source = self.own if beside and self.own is not None else self.path
-        cases, read = read_cases(source, self.package, self.test_name)
+        # Named as the result path, which the test was told it writes (not as ``own``).
+        cases, read = read_cases(source, self.package, self.test_name, self.path)
         self.problems = read.problems + read.repairs
         if read.repairs:
             self.properties["result_file_repairs"] = "; ".join(read.repairs)
         if os.path.lexists(source):
             try:
                 if beside:
-                    _remove(self.original)
+                    remove(self.original)
                     os.rename(source, self.original)
                 else:
-                    _keep_aside(self.path, self.original)
+                    keep_aside(self.path, self.original)
                     self._kept = os.lstat(self.original)
             except OSError as error:
                 problem = f"cannot keep the test's own file as {self.original}: {_reason(error)}"
@@ -422,6 +443,13 @@ class ResultFile:
             else:
                 self._adopted, self._beside = True, beside
                 self.properties["original_result_file"] = self.original.name
+        if self.in_place and not beside:
+            said = (
+                f"no argument of the command names {self.path.name}, so the test wrote it "
+                "itself: a runner killed after that write leaves the test's own word there"
+            )
+            self.properties[IN_PLACE_PROPERTY] = said
+            self.problems.append(f"{said} (see docs/faults.md)")
         return cases
 
 
@@ -429,40 +457,6 @@ if TYPE_CHECKING:
     #: A final word: how it is built from the properties, whether it is checked, and the
     #: earlier attempts of its series (None: none).
     _Word = tuple[Callable[[dict[str, str]], Suite], bool, tuple[Suite, ...] | None]
-
-
-def _keep_aside(path: Path, original: Path) -> None:
-    """Put the test's file at ``original`` too, whatever the test left there before.
-
-    ``original`` is ours (``prepare`` cleared it): anything there now the test made,
-    a file or a whole tree, and it gives way.
-    """
-    _remove(original)
-    mode = os.lstat(path).st_mode
-    if stat.S_ISDIR(mode):
-        os.rename(path, original)
-        return
-    try:
-        os.link(path, original, follow_symlinks=False)
-    except OSError:
-        # A file system without hard links: a copy (a symlink stays a symlink).
-        import shutil
-
-        shutil.copy2(path, original, follow_symlinks=False)
-
-
-def _remove(path: Path) -> None:
-    """Remove a file, a symlink or a whole directory tree at ``path``, if any."""
-    try:
-        mode = os.lstat(path).st_mode
-    except FileNotFoundError:
-        return
-    if stat.S_ISDIR(mode):
-        import shutil
-
-        shutil.rmtree(path)  # never follows a symlink inside
-    else:
-        os.unlink(path)
 
 
 def _reason(error: OSError) -> str:

@@ -130,7 +130,9 @@ def test_stale_result_file_from_an_earlier_run_does_not_count(ctest: Ctest) -> N
 def test_stale_result_file_is_gone_when_the_test_starts(ctest: Ctest, tmp_path: Path) -> None:
     ctest.result.parent.mkdir()
     own_result(ctest.result, [("stale_case_from_last_run", "passed", "")])
-    ctest.run(sh('cp "$1" seen.xml', str(ctest.result)), "--generate-result-on-success")
+    # The test looks at the result path itself (an argument naming it would be pointed beside).
+    look = sh(f'cp "$1/{ctest.result.name}" seen.xml', str(ctest.result.parent))
+    ctest.run(look, "--generate-result-on-success")
     assert "stale_case_from_last_run" not in (tmp_path / "seen.xml").read_text()
 
 
@@ -151,7 +153,8 @@ def test_placeholder_error_result_is_written_before_the_command_starts(
     ctest: Ctest, tmp_path: Path
 ) -> None:
     snapshot = tmp_path / "snapshot.xml"
-    ctest.run(sh('cp "$1" "$2"', str(ctest.result), str(snapshot)), "--generate-result-on-success")
+    look = sh(f'cp "$1/{ctest.result.name}" "$2"', str(ctest.result.parent), str(snapshot))
+    ctest.run(look, "--generate-result-on-success")
     placeholder = load_result(snapshot).only
     assert placeholder.outcome == "error"
     assert NO_RESULT in placeholder.message
@@ -427,7 +430,7 @@ def test_zero_without_result_file_and_without_generate_flag_fails(ctest: Ctest) 
 
 
 def test_zero_when_the_test_deleted_the_result_file_fails(ctest: Ctest) -> None:
-    ctest.run(["rm", str(ctest.result)], code=1)
+    ctest.run(sh(f'rm "$1/{ctest.result.name}"', str(ctest.result.parent)), code=1)
     assert ctest.case().outcome == "error"
 
 

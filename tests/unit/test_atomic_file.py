@@ -5,7 +5,9 @@ regular file. ``write_atomically`` renames a finished file into place; what is a
 path is checked before the temporary file is made and again just before the rename, so
 a special file that appears meanwhile is kept too. Real FIFOs, sockets and (as root) real
 device nodes; the second check is reached for real, by an audit hook that makes a FIFO
-the instant the temporary file is opened. The control: a regular file is still replaced
+the instant the temporary file is opened, and so is the rename itself (renameat2 swaps
+the names and a special file it took is swapped back), by one that makes it as the
+rename is called. The control: a regular file is still replaced
 atomically (a new inode, the whole content), and so is a symlink to one (the link).
 """
 
@@ -160,6 +162,62 @@ def test_a_fifo_that_appears_during_the_write_is_not_replaced_either(
     if what == "fifo":
         assert said.startswith("refused: ") and "it is a FIFO" in said, said
         assert stat.S_ISFIFO(os.lstat(path).st_mode)
+    else:
+        assert said == "written", said
+        assert path.read_bytes() == b"data"
+    assert _leftovers(tmp_path) == []
+
+
+#: As APPEARS_MEANWHILE, but the FIFO (or file) appears at the last instant, after every
+#: check: as os.rename is called, or as renameat2 is looked up in the C library, which the
+#: first write of a process does just before calling it. argv: path, what appears. Prints
+#: "written" or "refused: <why>", then the inode of what appeared.
+APPEARS_AT_THE_RENAME = """
+import os, sys
+from pathlib import Path
+from ros_isolated_test.atomic_file import NotReplaceableError, write_atomically
+path, what = Path(sys.argv[1]), sys.argv[2]
+opened, made = [], []
+def hook(event, args):
+    if event == "open" and str(args[0]).endswith(".tmp"):
+        opened.append(1)
+    elif opened and not made and (event == "os.rename" or args[1:2] == ("renameat2",)):
+        if what == "fifo":
+            os.mkfifo(path)
+        else:
+            path.write_bytes(b"appeared")
+        made.append(os.lstat(path).st_ino)
+sys.addaudithook(hook)
+try:
+    write_atomically(path, b"data")
+except NotReplaceableError as error:
+    print("refused:", error)
+else:
+    print("written")
+print(made[0] if made else "never hooked")
+"""
+
+
+@pytest.mark.parametrize("what", ["fifo", "file"])
+def test_a_fifo_that_appears_as_the_rename_is_called_is_not_replaced_either(
+    tmp_path: Path, what: str
+) -> None:
+    """No window between the last check and the rename: the rename decides by what it took.
+
+    The control: a regular file that appears at the same instant is replaced.
+    """
+    path = tmp_path / "r.xml"
+    proc = subprocess.run(
+        [sys.executable, "-c", APPEARS_AT_THE_RENAME, str(path), what],
+        capture_output=True, text=True, timeout=HUNG, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    said, made = proc.stdout.splitlines()
+    assert made != "never hooked", "nothing appeared at the rename"
+    if what == "fifo":
+        assert said.startswith("refused: ") and "it is a FIFO" in said, said
+        found = os.lstat(path)
+        assert stat.S_ISFIFO(found.st_mode) and found.st_ino == int(made), "not the same FIFO"
     else:
         assert said == "written", said
         assert path.read_bytes() == b"data"

@@ -112,11 +112,12 @@ def test_a_fifo_the_test_leaves_at_the_result_path_is_not_replaced_at_write_time
 
     --generate-result-on-success writes over the test's own file (run_test.py's rule), so
     nothing is kept aside: the FIFO stays, and the run fails saying why. The control: a
-    regular file the test leaves there is replaced by the passed result.
+    regular file the test leaves there is replaced by the passed result. The test finds
+    the path itself (no argument names it), so it writes there, not beside.
     """
     result = tmp_path / "pkg" / "r.xml"
-    make = 'mkfifo "$1"' if left == "fifo" else 'echo left > "$1"'
-    command = ["sh", "-c", f'rm -f "$1"; {make}', "t", str(result)]
+    make = 'mkfifo "$1/r.xml"' if left == "fifo" else 'echo left > "$1/r.xml"'
+    command = ["sh", "-c", f'rm -f "$1/r.xml"; {make}', "t", str(result.parent)]
     proc = through("runner", runner_script, env, tmp_path, command, result)
     if left == "fifo":
         assert proc.returncode == 1, proc.stdout + proc.stderr

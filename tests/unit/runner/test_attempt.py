@@ -5,8 +5,8 @@ is its own, not preset), which no other runner can take while it runs and every 
 can after; what the result records of the attempt is said and gathered in the order it
 happens (the ID's line, then the invocation, then the test's output). What the test
 left running is ended and named before the ID goes, and a leftover that keeps printing
-cannot hold the runner. In a rerun series, the command writes its own result beside the
-result path. In process with real commands, and through a real ``run``.
+cannot hold the runner. The command writes its own result beside the result path. In
+process with real commands, and through a real ``run``.
 """
 
 from __future__ import annotations
@@ -104,21 +104,26 @@ def test_what_the_test_left_running_is_ended_and_named_before_its_id_goes(
     assert free_now(DomainCoordinator(lock_dir, [domain_id]))
 
 
-def test_in_a_rerun_series_the_command_writes_its_own_result_beside_the_result_path(
-    tmp_path: Path,
+@pytest.mark.parametrize("reruns", [0, 1])
+def test_the_command_writes_its_own_result_beside_the_result_path(
+    tmp_path: Path, reruns: int
 ) -> None:
-    """So the result path holds the record so far until the runner merges the attempt."""
+    """So the result path holds the placeholder (or the record so far) until the runner
+    adopts the attempt, with reruns or without."""
     path = tmp_path / "pkg" / "t.xml"
     command = ("pytest", f"--junit-xml={path}", "-x")
-    once = settings.read({})
-    series = settings.read({}, reruns=1)
-    request = RunRequest(command, Mode.AMENT, series, result_file=path)
+    config = settings.read({}, reruns=reruns)
+    request = RunRequest(command, Mode.AMENT, config, result_file=path)
     result = ResultFile(path, command, "pkg", "t")
     own = path.with_name("t.xml.attempt2.orig")
-    assert command_of(request, series, result, 2) == ("pytest", f"--junit-xml={own}", "-x")
-    assert result.own == own
-    # The control: without reruns the command is the test's own, as given.
-    assert command_of(request, once, ResultFile(path, command, "pkg", "t"), 1) == command
+    assert command_of(request, result, 2) == ("pytest", f"--junit-xml={own}", "-x")
+    assert (result.own, result.in_place) == (own, False)
+    # The control: a command that names no argument as the result path is the test's own,
+    # as given, and said to write the result path itself.
+    named = ("pytest", "-x")
+    request = RunRequest(named, Mode.AMENT, config, result_file=path)
+    assert command_of(request, result, 1) == named
+    assert (result.own, result.in_place) == (None, True)
 
 
 # --- a real run ---------------------------------------------------------------------------------

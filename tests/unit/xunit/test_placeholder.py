@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 from helpers import capabilities
+from helpers.commands import CLI
 from helpers.tiny_disk import fill, run_on_tiny_disk
 from helpers.xunit import (
     NO_SPACE,
@@ -33,6 +34,7 @@ from helpers.xunit import (
     suite_of,
     valid_result,
 )
+from lxml import etree
 
 from ros_isolated_test.xunit import serialise, validate
 from ros_isolated_test.xunit.model import Case, Outcome
@@ -246,3 +248,84 @@ def test_the_stand_in_fits_the_placeholder_whatever_the_names_and_messages(
     assert NOT_WRITTEN in said
     assert "File too large" in said
     assert "cannot write result file" in done.stderr
+
+
+# --- a rerun series: the stand-in keeps the earlier attempts' failures ------------------------
+
+
+_LIMITED_SERIES = textwrap.dedent(
+    """
+    import resource, signal, sys
+    from pathlib import Path
+    from ros_isolated_test.xunit.model import Case, Outcome
+    from ros_isolated_test.xunit.result_file import ResultFile
+
+    path, long = Path(sys.argv[1]), int(sys.argv[2])
+    result = ResultFile(path, ("x" * long,), "pkg", "t")
+    result.prepare()
+    assert result.write_placeholder()
+    result.properties.update({"exit": "exited with code 1", "noise": "&" * long})
+    own = Case.saying("pkg.cases", "n" * long, Outcome.FAILURE, "<&> attempt 1 failed " * long)
+    assert result.write([result.case(Outcome.FAILURE, "exited 1"), own], 1.0, "o" * 100_000)
+    result.end_attempt()
+    assert result.next_attempt(1, {"command": "x" * long})
+    # Beyond the placeholder's size every write fails (EFBIG), as on a disk that filled up.
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (len(result.placeholder), resource.RLIM_INFINITY))
+    result.properties["exit"] = "exited with code 0"
+    result.write([result.case(Outcome.PASSED, duration=1.0)], 1.0, output="o" * 100_000)
+    print(result.write_error)
+    """
+)
+
+
+@pytest.mark.parametrize("long", [1, 5000], ids=["short", "huge"])
+def test_in_a_rerun_series_the_stand_in_keeps_the_earlier_attempts_failures(
+    long: int, env: dict[str, str], tmp_path: Path
+) -> None:
+    """Attempt 2's final write fails: the stand-in keeps attempt 1's failures, and fits."""
+    result = tmp_path / "pkg" / "t.xml"
+    done = subprocess.run(
+        [sys.executable, "-c", _LIMITED_SERIES, str(result), str(long)],
+        env=env, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "File too large" in done.stdout, "the final write did not fail"
+    root = valid_result(result)
+    _keeps_the_earlier_failure(root, "attempt 1 failed")
+    # Attempt 1's own case, which attempt 2 did not report: failed, then not run.
+    (other,) = [case for case in root.iter("testcase") if case.get("name") != "t"]
+    assert other.get("name", "").startswith("n") and other.find("failure") is not None
+
+
+def _keeps_the_earlier_failure(root: etree._Element, failure: str) -> None:
+    """The stand-in's case (an error) carries attempt 1's failure; the file counts 2 attempts."""
+    (stand_in,) = [case for case in root.iter("testcase") if case.get("name") == "t"]
+    error = stand_in.find("error")
+    assert error is not None and NOT_WRITTEN in (error.get("message") or "")
+    earlier = etree.tostring(root, encoding="unicode")
+    assert stand_in.find("rerunFailure") is not None, etree.tostring(stand_in)
+    assert failure in earlier, earlier
+    assert properties_of(root)["attempts"] == "2"
+    assert TIMED_OUT not in earlier
+
+
+@capabilities.MOUNT_NAMESPACE
+def test_a_rerun_whose_final_write_fails_on_a_full_disk_keeps_attempt_1_in_the_result_path(
+    one_id: dict[str, str], tmp_path: Path
+) -> None:
+    """Attempt 1 fails; attempt 2 fills the disk and passes: its word cannot be written."""
+    disk = tmp_path / "disk"
+    result = disk / "pkg" / "t.xml"
+    kept = tmp_path / "kept.xml"
+    script = (
+        f'if [ -e "$1" ]; then {fill(disk)}; exit 0; fi; '
+        ': > "$1"; echo "failed on $ROS_DOMAIN_ID"; exit 1'
+    )
+    argv = [CLI, "run", "--rerun-failures", "1", "--junit-xml", str(result),
+            "--", "sh", "-c", script, "t", str(tmp_path / "state")]  # fmt: skip
+
+    done = run_on_tiny_disk(disk, argv, one_id, then=f"cp {result} {kept}")
+
+    assert done.returncode == 1, done.stderr.decode()
+    _keeps_the_earlier_failure(valid_result(kept), "failed on ")

@@ -4,11 +4,12 @@ Stale files of an earlier run go first; then the placeholder (what a killed runn
 leaves); then the final word: the runner's own result, or the test's own file made
 canonical with the original kept beside it as ``.orig`` (linked there before the
 canonical file replaces it in one rename, so a kill at any instant leaves a file at
-the path). When the final write fails, the test's own file moved aside goes back, and
-the run exits 1 with the error on stderr; directories a test leaves where its result
-or our ``.orig`` go still give a result saying so. The stand-in that overwrites the
-placeholder is ``test_placeholder``'s. In a rerun series the file on disk never shows an
-attempt without the failures before it, and the test's own file of each attempt is kept.
+the path). When the final write fails, the test's own file is kept (beside as ``.orig``,
+or, written in place, left there), and the run exits 1 with the error on stderr;
+directories a test leaves where its result or our ``.orig`` go still give a result saying
+so. The stand-in that overwrites the placeholder is ``test_placeholder``'s. In a rerun
+series the file on disk never shows an attempt without the failures before it, and the
+test's own file of each attempt is kept.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from lxml import etree
 
 from ros_isolated_test.atomic_file import NotReplaceableError
 from ros_isolated_test.xunit.model import Outcome
+from ros_isolated_test.xunit.placeholder import NOT_WRITTEN
 from ros_isolated_test.xunit.result_file import ResultFile
 
 
@@ -129,24 +131,40 @@ def test_the_tests_own_file_is_adopted_and_kept_beside_the_canonical_one(tmp_pat
 
 
 @capabilities.MOUNT_NAMESPACE
+@pytest.mark.parametrize("where", ["beside", "in place"])
 def test_the_tests_own_result_file_stays_when_its_normalised_form_cannot_be_written(
-    runner_script: str, env: dict[str, str], tmp_path: Path
+    runner_script: str, env: dict[str, str], tmp_path: Path, where: str
 ) -> None:
-    """It is moved aside to be normalised: a failed write must not leave nothing behind."""
+    """A failed write must not lose the test's own file, nor leave a pass it did not make.
+
+    Written beside (its argument names the result path), the file is kept as ``.orig``
+    and the placeholder gives way to the stand-in naming it. Written in place (the test
+    finds the path itself), the test's own file is left there, as it wrote it.
+    """
     disk = tmp_path / "disk"
     result = disk / "pkg" / "t.xml"
     kept = tmp_path / "kept.xml"
+    original = tmp_path / "kept.orig"
     source = tmp_path / "own.xml"
     source.write_bytes(OWN)
-    script = f'cp {source} "$0"; {fill(disk)}'
-    argv = argv_for("runner", runner_script, result, "sh", "-c", script, str(result))
+    target = '"$0"' if where == "beside" else '"$0/t.xml"'
+    script = f"cp {source} {target}; {fill(disk)}"
+    named = result if where == "beside" else result.parent
+    argv = argv_for("runner", runner_script, result, "sh", "-c", script, str(named))
+    copy = f"cp {result} {kept}; cp {result}.orig {original} || true"
 
-    done = run_on_tiny_disk(disk, argv, env, then=f"cp {result} {kept}")
+    done = run_on_tiny_disk(disk, argv, env, then=copy)
 
     stderr = done.stderr.decode()
     assert done.returncode == 1, stderr
     assert f"cannot write result file {result}: {NO_SPACE}" in stderr
-    assert kept.read_bytes() == OWN, "the test's own result file is gone"
+    if where == "in place":
+        assert kept.read_bytes() == OWN, "the test's own result file is gone"
+        return
+    assert original.read_bytes() == OWN, "the test's own result file is gone"
+    root = valid_result(kept)
+    assert NOT_WRITTEN in only_error(root)
+    assert properties_of(root)["original_result_file"] == "t.xml.orig"
 
 
 @capabilities.MOUNT_NAMESPACE
