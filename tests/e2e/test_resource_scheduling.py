@@ -38,6 +38,7 @@ import pytest
 from helpers import resource_probe
 from helpers.commands import HUNG, ament_args, run_cli, run_runner, start_cli
 from helpers.domains import free_ids
+from helpers.orphans import in_background
 from helpers.processes import poll_until
 from helpers.resource_probe import ended, peaks, starts
 from helpers.results import load_result, result_error
@@ -100,12 +101,22 @@ class Probes:
         self.asked: dict[str, dict[str, int]] = {}
 
     def start(
-        self, label: str, request: str, *options: object, env: dict[str, str] | None = None
+        self,
+        label: str,
+        request: str,
+        *options: object,
+        env: dict[str, str] | None = None,
+        orphan: bool = False,
     ) -> subprocess.Popen[bytes]:
-        """A runner asking ``request`` whose test is the probe ``label`` with ``options``."""
+        """A runner asking ``request`` whose test is the probe ``label`` with ``options``.
+
+        ``orphan``: the probe runs as the test's own child, so it outlives a runner killed
+        alone (the runner's direct child dies with it).
+        """
+        probe = resource_probe.command(self.log, label, *options)
         args = _run_args(
             request,
-            resource_probe.command(self.log, label, *options),
+            in_background(probe) if orphan else probe,
             "--wait-timeout",
             "600",
             "--junit-xml",
@@ -315,7 +326,7 @@ def test_sigkill_of_a_runner_holding_resources_frees_them(
     """The waiter runs once its holder is SIGKILLed, while the holder's orphaned test lives."""
     probes = Probes(_env(env, "gpu=1"), tmp_path, started)
     go = tmp_path / "go"
-    holder = probes.start("holder", "gpu=1", "--until", go)
+    holder = probes.start("holder", "gpu=1", "--until", go, orphan=True)
     probes.wait_started("holder")
     probes.start("waiter", "gpu=1")
     _wait_queued(probes, "waiter")

@@ -58,3 +58,13 @@ def lives_on(pid: int, answer: Path) -> None:
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
+
+
+def in_background(command: list[str]) -> list[str]:
+    """``command`` as a child of a shell the runner starts: it outlives a runner killed alone.
+
+    The runner's own child dies with it (the death signal set between fork and exec), so a
+    test that must show what an orphan does after its runner's death runs one level
+    down, as a test's own child or daemon would.
+    """
+    return ["sh", "-c", '"$@" & wait', "sh", *command]

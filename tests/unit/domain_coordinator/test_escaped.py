@@ -22,6 +22,7 @@ from helpers import capabilities
 from helpers.commands import CLI
 from helpers.coordinator import wait_for_environment, wait_gone
 from helpers.domains import free_ids
+from helpers.orphans import in_background
 from helpers.processes import DEADLINE, Children, wait_for
 from helpers.tiny_disk import run_on_tiny_disk
 
@@ -258,9 +259,8 @@ def test_a_runner_killed_while_its_test_is_between_participants_keeps_the_id_blo
     env["ROS_ISOLATED_TEST_DOMAINS"] = str(domain_id)
     pid_file, go = tmp_path / "test.pid", tmp_path / "go"
     script = BETWEEN_PARTICIPANTS
-    runner = children.start(
-        [CLI, "run", "--", sys.executable, "-c", script, str(pid_file), str(go)], env=env
-    )
+    test = [sys.executable, "-c", script, str(pid_file), str(go)]
+    runner = children.start([CLI, "run", "--", *in_background(test)], env=env)
     try:
         wait_for(pid_file, timeout=DEADLINE)
         test_pid = int(pid_file.read_text())

@@ -27,6 +27,7 @@ import pytest
 from helpers.commands import CLI
 from helpers.coordinator import HOLD_SCRIPT
 from helpers.domains import free_ids
+from helpers.orphans import in_background
 from helpers.processes import DEADLINE, WAIT_SCRIPT, Children, user_keywords, wait_for
 
 from ros_isolated_test.domain_coordinator import POOL_ENV, DomainCoordinator, domain_uses
@@ -163,9 +164,8 @@ def test_a_sigkilled_runner_frees_its_lock_and_port_but_its_test_still_blocks_th
     (domain_id,) = free_ids(1)
     env[POOL_ENV] = str(domain_id)
     pid_file, go = tmp_path / "test.pid", tmp_path / "go"
-    runner = children.start(
-        [CLI, "run", "--", sys.executable, "-c", WAIT_SCRIPT, str(pid_file), str(go)], env=env
-    )
+    test = [sys.executable, "-c", WAIT_SCRIPT, str(pid_file), str(go)]
+    runner = children.start([CLI, "run", "--", *in_background(test)], env=env)
     wait_for(pid_file)
     test_pid = int(pid_file.read_text())
     try:
