@@ -44,6 +44,7 @@ import overhead
 import preset
 import pytest_session
 import shard_cost
+import split
 import suite
 import wave_of_tests
 from common import (
@@ -83,6 +84,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "namespace": namespace_mode.run,
     "shard_cost": shard_cost.run,
     "gain": gain.run,
+    "split": split.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"

@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import math
+import os
 import sys
 from pathlib import Path
 
 import click
 
 from ros_isolated_test import __version__
+from ros_isolated_test.cli_report import report
 from ros_isolated_test.cli_shard import shard
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
 from ros_isolated_test.process.supervisor import KILL_GRACE
-from ros_isolated_test.runner import session, settings
+from ros_isolated_test.runner import session, settings, share
 from ros_isolated_test.runner.partition import OPT_OUT_ENV as GZ_PARTITION_ENV
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.settings import (
@@ -26,10 +28,7 @@ from ros_isolated_test.runner.settings import (
     RERUNS_ENV,
     WAIT_TIMEOUT_ENV,
 )
-
-TYPE_CHECKING = False
-if TYPE_CHECKING:
-    from ros_isolated_test.report.text_report import TextReport
+from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV, ShardSettingError
 
 EXIT_CODES_HELP = """\b
 Exit codes:
@@ -44,6 +43,8 @@ Exit codes:
            the --junit-xml or --output-file path cannot be used, --resources
            asks for more than the capacity, or runners disagree on a capacity
   3        nothing was run: no domain ID (or the resources asked for) came free
+  77       not run: the test is another share's of a split (--shard); else the
+           command's own 77
   124      stopped by --timeout
   126/127  the command could not be executed / was not found
 """
@@ -66,6 +67,8 @@ Environment:
   {ISOLATION_ENV}=namespace|auto  the test's own network, /dev/shm and
                                      IPC too, never waiting for an ID (run --isolation)
   {DISABLE_VAR}=1                 run without reserving an ID (loudly)
+  {SHARD_ENV}=I/N        run only share I of N of the tests (run --shard)
+  {DURATIONS_ENV}=FILE   the durations file (absolute) the split balances by
 """
 
 
@@ -82,6 +85,7 @@ def cli() -> None:
     """
 
 
+cli.add_command(report)
 cli.add_command(shard)
 
 
@@ -217,6 +221,13 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     "none is free); refused where user namespaces are not allowed. auto: namespace where "
     f"allowed, else domain. Default: {ISOLATION_ENV}, else domain.",
 )
+@click.option(
+    "--shard",
+    metavar="I/N",
+    help=f"Run COMMAND only when it is in share I of N of a split (by its --package-name "
+    f"and --junit-xml name, balanced by {DURATIONS_ENV}); else print why, write no result "
+    f"and exit 77. Default: {SHARD_ENV}, else no split.",
+)
 @click.argument("command", nargs=-1, required=True, type=click.UNPROCESSED)
 def run(
     junit_xml: Path | None,
@@ -229,6 +240,7 @@ def run(
     rerun_failures: int | None,
     resources: str | None,
     isolation: str | None,
+    shard: str | None,
     command: tuple[str, ...],
 ) -> None:
     """Reserve a free ROS_DOMAIN_ID, run COMMAND with it, exit with its exit code.
@@ -249,7 +261,8 @@ def run(
             resources=resources,
             isolation=isolation,
         )
-    except settings.SettingsError as error:
+        split = share.read(os.environ, shard)
+    except (settings.SettingsError, ShardSettingError) as error:
         sys.exit(session.report_usage_error(str(error), junit_xml))
     request = RunRequest(
         command=command,
@@ -261,6 +274,7 @@ def run(
         timeout=timeout,
         kill_grace=kill_grace,
         settings=config,
+        shard=split,
     )
     sys.exit(session.run(request))
 
@@ -378,71 +392,6 @@ def status(as_json: bool) -> None:
     if found.queue_problem is not None:
         click.echo(f"ros-isolated-test: note: {found.queue_problem}", err=True)
     click.echo(status_table.as_json(found) if as_json else status_table.table(found))
-
-
-@cli.command()
-@click.argument(
-    "paths",
-    nargs=-1,
-    type=click.Path(exists=True, path_type=Path),
-)
-@click.option("--verbose", "-v", is_flag=True, help="List each failure with its message.")
-@click.option("--json", "as_json", is_flag=True, help="Print the same as JSON.")
-@click.option(
-    "--html",
-    "html_file",
-    type=click.Path(path_type=Path),
-    help="Also write one self-contained page (with a timeline of every attempt) to this file.",
-)
-def report(paths: tuple[Path, ...], verbose: bool, as_json: bool, html_file: Path | None) -> None:
-    """Summarise the xUnit result files under PATHS (default: build).
-
-    Prints each file's counts and the total, like `colcon test-result --all`, counted
-    from the test cases themselves. Reads canonical files and raw gtest, pytest,
-    launch_testing, unittest-xml-reporting and ctest files alike; a broken file, or a
-    folder it cannot read, counts as an error. Exits 1 when anything failed or errored.
-    With --html FILE it also writes one page for them all, to open in a browser
-    offline: totals, failures first, flaky cases, every case by package and suite, and
-    a timeline of every attempt on its domain ID (exit 2 when FILE cannot be written).
-    """
-    from ros_isolated_test.report import text_report, tree
-
-    if not paths:
-        default = Path("build")
-        if not default.exists():
-            raise click.UsageError("no PATHS given and no 'build' folder here; name a folder")
-        paths = (default,)
-    # A folder it cannot read is an error; a flaky case (passed after failing) is listed
-    # apart and never fails the report, one that failed and was then not run always does.
-    # Each file is read once (for the page too) and only its counts are kept.
-    with text_report.TextReport(verbose, as_json) as printed:
-        if html_file is None:
-            for item in tree.read_tree(paths):
-                printed.add(item)
-        else:
-            _html_report(paths, html_file, printed)
-        printed.write(lambda piece: click.echo(piece, nl=False))
-    if printed.total.failed:
-        sys.exit(1)
-
-
-def _html_report(paths: tuple[Path, ...], destination: Path, printed: TextReport) -> None:
-    """Write the page (read once, for it and the text); a page that cannot be written: exit 2."""
-    from ros_isolated_test import atomic_file
-    from ros_isolated_test.report import html_report
-
-    try:
-        html_report.write(paths, destination, printed.add)
-    except OSError as error:
-        fix = "choose a writable file path"
-        if isinstance(error, atomic_file.NotReplaceableError):
-            fix = "name a regular file instead, or /dev/null to discard the page"
-        click.echo(
-            f"ros-isolated-test: error: cannot write --html {destination}: "
-            f"{error.strerror or error}; {fix}",
-            err=True,
-        )
-        sys.exit(2)
 
 
 @cli.command()

@@ -2,8 +2,8 @@
 
 The command only parses its arguments and hands over: the plan and its rendering live
 in ``ros_isolated_test.shard``. What it reads of result trees is one function,
-:func:`tests_in`, the one place that knows how a result file names its test. Added to
-the command group by ``cli.py`` (``cli.add_command``).
+:func:`tests_in`, through the report package's reading of which tests a file names.
+Added to the command group by ``cli.py`` (``cli.add_command``).
 """
 
 from __future__ import annotations
@@ -99,31 +99,26 @@ def shard(
 
 
 def tests_in(trees: tuple[Path, ...]) -> set[str]:
-    """The identities of the tests the runner left results for under ``trees``.
+    """The identities of the tests the runner and the plugin left results for under ``trees``.
 
-    A runner's result file holds one suite, ``<package>.<test>``, where ``<test>`` is the
-    file's name without its suffix: that is the test's package and ctest name. Other
-    files (a producer's own, pytest's) name no test this way and are left out.
+    A runner's result file is its ctest test, an item in pytest's file under the plugin
+    the node id it names (``report.measured``); other files name no test and are left out.
     """
-    from ros_isolated_test.report.tree import result_files
-    from ros_isolated_test.shard.identity import identity
+    from ros_isolated_test.report.measured import named_tests
+    from ros_isolated_test.report.tree import read_file, result_files
     from ros_isolated_test.text import display_text
-    from ros_isolated_test.xunit import reader
-    from ros_isolated_test.xunit.canonical import test_name_of
 
     found: set[str] = set()
-    for item in result_files(trees):
-        if isinstance(item, OSError):
-            folder = display_text(str(item.filename))
+    for path in result_files(trees):
+        if isinstance(path, OSError):
+            folder = display_text(str(path.filename))
             click.echo(
-                f"ros-isolated-test: note: cannot read {folder}: {item.strerror}; its tests "
+                f"ros-isolated-test: note: cannot read {folder}: {path.strerror}; its tests "
                 "are not shown",
                 err=True,
             )
             continue
-        test = test_name_of(item)
-        for suite in reader.read(item).suites:
-            package = suite.name.removesuffix(f".{test}")
-            if package != suite.name and package and "/" not in package:
-                found.add(identity(package, test))
+        item = read_file(path)
+        if item is not None:
+            found.update(key for key, _seconds in named_tests(item))
     return found

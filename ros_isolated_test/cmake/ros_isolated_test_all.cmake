@@ -1,5 +1,6 @@
 # ros_isolated_test_all([RERUNS n] [RESOURCES spec]): one line that puts every test of the
-# package on our RUNNER; with RERUNS, each of them runs again up to n times when it fails
+# package on our RUNNER (each with ctest's SKIP_RETURN_CODE 77 unless it has a skip code
+# of its own: a test of another share of a split is shown as skipped); with RERUNS, each of them runs again up to n times when it fails
 # (every attempt kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS;
 # with RESOURCES (e.g. cpu=2,mem=4G, or a CMake list "cpu=2;mem=4G"), each of them holds
 # those machine resources with its domain ID (waiting until they are free), unless its own
@@ -118,9 +119,11 @@ function(_ros_isolated_test_wrap_ament_add_test)
     _ros_isolated_test_runner(_runner)
     _ros_isolated_test_runner_kind(_kind "${_rit_RUNNER}" "${_runner}" "${_rit_ENV}")
     if(_kind MATCHES "^(ours|upstream)$")
+      get_property(_before DIRECTORY PROPERTY TESTS)
       # Last, so it also replaces an empty RUNNER, which ament_add_test reads as "default",
       # and upstream's (cmake_parse_arguments keeps the last value).
       _ament_add_test("${testname}" ${_default_env} ${ARGN} RUNNER "${_runner}")
+      _ros_isolated_test_skip_codes("${_before}")
     else()
       # Another runner: RERUNS and RESOURCES are ours, not its.
       _ament_add_test("${testname}" ${ARGN})

@@ -1,5 +1,8 @@
 # ros_isolated_add_*: the ament and launch_testing test macros with ros-isolated-test as
-# RUNNER. Each takes exactly the arguments of the macro it wraps, and two more:
+# RUNNER. Each test they register gets ctest's SKIP_RETURN_CODE 77 unless it has a skip
+# code of its own: in a split over machines (ROS_ISOLATED_TEST_SHARD=I/N) the RUNNER exits
+# 77 for a test of another share, which ctest then shows as skipped.
+# Each takes exactly the arguments of the macro it wraps, and two more:
 # RERUNS <n> runs a failed test again up to n times, every attempt kept in its result file
 # (ENV ROS_ISOLATED_TEST_RERUNS=<n>, which the RUNNER reads);
 # RESOURCES <spec> (e.g. RESOURCES cpu=2,mem=4G,gpu=1, or a CMake list "cpu=2;gpu=1")
@@ -118,6 +121,25 @@ function(_ros_isolated_test_check_resources value)
   endif()
 endfunction()
 
+# Gives each test of this directory not in ${before} (the directory's TESTS before a test
+# was added) ctest's SKIP_RETURN_CODE 77, unless it has a skip code already (ament's
+# SKIP_RETURN_CODE, or 0 for SKIP_TEST). The RUNNER exits 77 for a test of another share
+# of a split (ROS_ISOLATED_TEST_SHARD), which ctest then shows as skipped, never failed
+# or passed; a test it ran that exits 77 fails (exit 1), so 77 is never the test's own.
+function(_ros_isolated_test_skip_codes before)
+  get_property(_tests DIRECTORY PROPERTY TESTS)
+  foreach(_test IN LISTS _tests)
+    list(FIND before "${_test}" _known)
+    if(NOT _known EQUAL -1)
+      continue()
+    endif()
+    get_test_property("${_test}" SKIP_RETURN_CODE _code)
+    if("${_code}" STREQUAL "NOTFOUND")
+      set_tests_properties("${_test}" PROPERTIES SKIP_RETURN_CODE 77)
+    endif()
+  endforeach()
+endfunction()
+
 # Macros, not functions: a macro runs in the caller's scope, so what find_package() sets
 # when a macro finds ament_cmake_gtest, ament_cmake_pytest, ... outlives the call, and the
 # next call neither finds the package again nor loads its files a second time. Their own
@@ -135,6 +157,7 @@ macro(_ros_isolated_test_add _ros_isolated_test_command _ros_isolated_test_packa
     find_package(${_ros_isolated_test_package} REQUIRED)
   endif()
   _ros_isolated_test_arguments(_ros_isolated_test_arguments ${_ros_isolated_test_argn})
+  get_property(_ros_isolated_test_before DIRECTORY PROPERTY TESTS)
   set(_ros_isolated_test_kind ${_ros_isolated_test_command})
   if(_ros_isolated_test_kind MATCHES "^ament_add_gtest$")
     ament_add_gtest("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
@@ -149,6 +172,7 @@ macro(_ros_isolated_test_add _ros_isolated_test_command _ros_isolated_test_packa
   else()
     ament_add_test("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
   endif()
+  _ros_isolated_test_skip_codes("${_ros_isolated_test_before}")
 endmacro()
 
 # ros_isolated_add_test(testname COMMAND ... [RERUNS n] [RESOURCES spec]

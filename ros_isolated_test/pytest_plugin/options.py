@@ -17,6 +17,8 @@ INI = "ros_isolation"
 #: The session's request of machine resources: the ini option and its command-line twin.
 RESOURCES_INI = "ros_isolated_test_resources"
 RESOURCES_OPTION = "--ros-isolated-test-resources"
+#: The session's share of a split (sharding.py reads it).
+SHARD_OPTION = "--ros-isolated-test-shard"
 #: Options that run no test (as --help): nothing is reserved for them.
 _NO_TEST_OPTIONS = ("help", "markers", "showfixtures", "show_fixtures_per_test", "collectonly")
 
@@ -61,6 +63,15 @@ def add(parser: pytest.Parser) -> None:
         help=f"{resources_help}; wins over the ini option {RESOURCES_INI}",
     )
     parser.addini(RESOURCES_INI, f"{resources_help}; {RESOURCES_OPTION} wins", default="")
+    group.addoption(
+        SHARD_OPTION,
+        dest="ros_isolated_test_shard",
+        metavar="I/N",
+        default=None,
+        help="run only share I of N of the collected tests (a split over N machines), "
+        "balanced by ROS_ISOLATED_TEST_DURATIONS; the others are deselected; wins over "
+        "ROS_ISOLATED_TEST_SHARD",
+    )
 
 
 def decide(config: pytest.Config) -> bool | None:

@@ -29,8 +29,10 @@ import pytest
 TYPE_CHECKING = False  # nothing of the runner is imported until the plugin is active
 if TYPE_CHECKING:
     from ros_isolated_test.pytest_plugin.holding import State
+    from ros_isolated_test.pytest_plugin.sharding import Sharding
 
 _STATE: pytest.StashKey[State] = pytest.StashKey()
+_SHARDING: pytest.StashKey[Sharding] = pytest.StashKey()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -57,6 +59,7 @@ def pytest_configure(config: pytest.Config) -> None:
     from ros_isolated_test.pytest_plugin import options
 
     explicit = options.decide(config)
+    _split(config, explicit is not None)  # before isolating: that takes the split's variables
     if explicit is None:
         return
     from ros_isolated_test.pytest_plugin import holding
@@ -65,6 +68,16 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[_STATE] = state
     controller = not hasattr(config, "workerinput") and getattr(config.option, "dist", "no") != "no"
     holding.isolate(config, state, explicit=explicit, controller=controller)
+
+
+def _split(config: pytest.Config, active: bool) -> None:
+    """The session's share of a split, and the naming of its items (sharding.py)."""
+    from ros_isolated_test.pytest_plugin import sharding
+
+    decided = sharding.decide(config, active)
+    if decided is not None:
+        config.stash[_SHARDING] = decided
+        sharding.leave_record(decided, config)
 
 
 def _launch_testing_loaded() -> bool:
@@ -77,24 +90,35 @@ def _launch_pytest_loaded(config: pytest.Config) -> bool:
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
     state = config.stash.get(_STATE, None)
-    return [] if state is None else state.header
+    split = config.stash.get(_SHARDING, None)
+    return [*([] if state is None else state.header), *([] if split is None else split.header)]
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """The ID as a suite property of pytest's own --junit-xml."""
+    """The ID and the share as suite properties of pytest's own --junit-xml."""
     state = session.config.stash.get(_STATE, None)
-    if (
-        state is None
-        or not state.properties
-        or getattr(session.config.option, "xmlpath", None) is None
-    ):
+    split = session.config.stash.get(_SHARDING, None)
+    properties = [
+        *([] if state is None else state.properties),
+        *([] if split is None else split.properties),
+    ]
+    if not properties or getattr(session.config.option, "xmlpath", None) is None:
         return
     from _pytest.junitxml import xml_key
 
     xml = session.config.stash.get(xml_key, None)
     if xml is not None:  # None in an xdist worker: the controller writes the file
-        for name, value in state.properties:
+        for name, value in properties:
             xml.add_global_property(name, value)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Each item named by its identity; the other shares' items deselected (sharding.py)."""
+    split = config.stash.get(_SHARDING, None)
+    if split is not None:
+        from ros_isolated_test.pytest_plugin import sharding
+
+        sharding.select_items(split, config, items)
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -177,6 +201,11 @@ def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]
     interrupted xdist controller first waits for its workers, before xdist's teardown.
     """
     config = session.config
+    split = config.stash.get(_SHARDING, None)
+    if split is not None:  # a session whose share held none of its tests passed: not 5
+        from ros_isolated_test.pytest_plugin import sharding
+
+        session.exitstatus = sharding.exit_status(split, config, session.exitstatus)
     state = config.stash.get(_STATE, None)
     if state is not None and state.interrupts.interrupted:
         state.interrupts.wait_for_workers()

@@ -32,6 +32,8 @@ h2{font-size:17px;margin:22px 0 8px;border-bottom:2px solid var(--line);padding-
 min-width:7em}
 .total b{display:block;font-size:20px}
 .total.bad b{color:var(--fail)}.total.warn b{color:var(--flaky)}
+#split-problems{border:2px solid var(--fail);border-radius:6px;background:#fff;
+padding:0 12px;margin:14px 0}#split-problems h2{color:var(--fail)}
 table.facts{border-collapse:collapse;background:#fff}
 table.facts th,table.facts td{border:1px solid var(--line);padding:3px 8px;text-align:left;
 vertical-align:top}

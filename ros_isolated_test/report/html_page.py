@@ -64,6 +64,9 @@ class Page:
         self.rest = Spool()
         #: (package, suite, file number, offset, length, tests, listed above) per block.
         self.blocks: list[tuple[str, str, int, int, int, int, int]] = []
+        #: A split's shares found (``I/N``, plan, hosts) and its problems (``shards``).
+        self.shares: list[tuple[str, str, list[str]]] = []
+        self.split_problems: list[str] = []
 
     def note(self, fact: str, value: str) -> None:
         """Count ``value`` of ``fact`` ("": not recorded); past FACT_VALUES only counted."""
@@ -94,8 +97,10 @@ def assemble(page: Page, out: IO[bytes]) -> None:
         out.write(text.encode("utf-8", "backslashreplace"))
 
     total = page.total
-    verdict = "FAILED" if total.failed else "PASSED"
+    verdict = "FAILED" if total.failed or page.split_problems else "PASSED"
     headline = _headline(total)
+    if page.split_problems:
+        headline += f"; the split's results are incomplete ({len(page.split_problems)} problem(s))"
     put(
         "<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8>"
         '<meta http-equiv="Content-Security-Policy" '
@@ -107,6 +112,7 @@ def assemble(page: Page, out: IO[bytes]) -> None:
         f'<header class="banner {verdict.lower()}"><h1>{verdict}</h1>'
         f"<p>{escape(headline)}</p></header><main>"
     )
+    put(_split_problems_html(page))
     put(_totals_html(page))
     put(_facts_html(page))
     write_timeline(page.bars, put)
@@ -140,6 +146,17 @@ def _headline(total: FileReport) -> str:
     if total.flaky:
         said.append(f"{total.flaky} flaky")
     return ", ".join(said)
+
+
+def _split_problems_html(page: Page) -> str:
+    """What is wrong with a split's merged trees, first: the totals below may be short."""
+    if not page.split_problems:
+        return ""
+    items = "".join(f"<li>{text(line, 2048)}</li>" for line in page.split_problems)
+    return (
+        f"<section id=split-problems class=bad><h2>The split's results are incomplete "
+        f"({len(page.split_problems)})</h2><ul>{items}</ul></section>"
+    )
 
 
 def _totals_html(page: Page) -> str:
@@ -179,6 +196,12 @@ def _facts_html(page: Page) -> str:
             f"<tr><th>ran</th><td>{escape(local(first))} to {escape(local(last))} "
             f"({last - first:.1f} s)</td></tr>"
         )
+    if page.shares:
+        shares = "; ".join(
+            f"{share} (plan {plan}{', on ' + ', '.join(hosts) if hosts else ''})"
+            for share, plan, hosts in page.shares
+        )
+        rows.append(f"<tr><th>shards</th><td id=fact-shards>{text(shares, 8192)}</td></tr>")
     if page.foreign:
         rows.append(
             f"<tr><th>other producers</th><td>{page.foreign} result file(s) not written by "

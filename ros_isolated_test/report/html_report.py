@@ -39,6 +39,7 @@ from ros_isolated_test.report.counts import FileReport, listed_as_flaky
 from ros_isolated_test.report.html_page import FACTS, Page, assemble
 from ros_isolated_test.report.html_parts import text, write_case, write_suite
 from ros_isolated_test.report.html_timeline import BAR_TEXT
+from ros_isolated_test.report.shards import Split
 from ros_isolated_test.report.tree import FileRead, read_tree
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import raw
@@ -46,7 +47,10 @@ from ros_isolated_test.xunit.canonical import test_name_of
 
 
 def write(
-    paths: Iterable[Path], destination: Path, each: Callable[[FileRead], object] | None = None
+    paths: Iterable[Path],
+    destination: Path,
+    each: Callable[[FileRead], object] | None = None,
+    split: Split | None = None,
 ) -> FileReport:
     """Write the page for every result file under ``paths`` to ``destination``.
 
@@ -54,7 +58,8 @@ def write(
     forgotten; returns the counts of them all. ``destination`` is replaced whole in one
     rename (a reader never sees half a page); the null device discards it; a device
     node, FIFO or socket is never replaced (:class:`NotReplaceableError`, before
-    anything is read).
+    anything is read). ``split`` gathers what the trees say of a split (each file and
+    the machines' records), which the page shows with its problems.
     """
     discard = discards(destination)
     kind = None if discard else special_kind(destination)
@@ -63,11 +68,17 @@ def write(
     if not discard and destination.is_dir():
         raise IsADirectoryError(21, "it is a directory", str(destination))
     page = Page()
+    records: list[Path] = []
     try:
-        for number, item in enumerate(read_tree(paths), start=1):
+        for number, item in enumerate(read_tree(paths, records), start=1):
             _add(page, item, number)
+            if split is not None:
+                split.add(item)
             if each is not None:
                 each(item)
+        if split is not None:
+            split.add_records(records)
+            page.shares, page.split_problems = split.shares(), split.problems
         if not discard:
             with _replacing(destination) as out:
                 assemble(page, out)

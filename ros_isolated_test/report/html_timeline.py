@@ -2,8 +2,10 @@
 
 Read from what the runner records in each result file (``result_file.STARTED_AT`` and
 its neighbours: when each attempt ran, on which domain ID, what it waited for first and
-what it held), or from another producer's own timestamp; then placed in rows per (host,
-domain ID), lanes only where bars overlap, and a round-numbered axis. Apart from the
+what it held), or from another producer's own timestamp; then placed in rows per (machine,
+domain ID), lanes only where bars overlap, and a round-numbered axis. A machine is a host,
+or a share of a split on it (``shard 2/4 · host``): the machines of a split's merged
+trees each get their group of rows, even when they share a host name. Apart from the
 rest of the page because this is the one part that reasons about time and placement.
 """
 
@@ -16,6 +18,7 @@ from html import escape
 from ros_isolated_test.report.bounded_values import LONGEST, Reading, local
 from ros_isolated_test.report.counts import FileReport
 from ros_isolated_test.report.html_parts import attr, text
+from ros_isolated_test.shard.selection import SHARD_PROPERTY
 from ros_isolated_test.xunit import raw
 from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY
 from ros_isolated_test.xunit.timeline import ENDED_AT, STARTED_AT, WAIT_DOMAIN, WAIT_RESOURCES
@@ -36,6 +39,7 @@ class Bar:
         "domain",
         "end",
         "host",
+        "machine",
         "resources",
         "start",
         "state",
@@ -59,9 +63,12 @@ class Bar:
         wait_domain: float = 0.0,
         wait_resources: float = 0.0,
         resources: str = "",
+        machine: str | None = None,
     ) -> None:
         self.test = test[:BAR_TEXT]
         self.host = host[:BAR_TEXT]
+        #: Where it ran, as its group of rows says it: the host, or ``shard I/N · host``.
+        self.machine = (host if machine is None else machine)[:BAR_TEXT]
         #: The ID as the result says it ("17"); "" when the test had none of ours.
         self.domain = domain
         self.start = start
@@ -94,12 +101,13 @@ def bars_of(
     bounds (``reading``): one that cannot be drawn is named there, never computed with.
     """
     final = _final_state(properties.get("exit", ""), report)
+    machine = machine_of(properties, host)
     if STARTED_AT not in properties:
         span = _producer_span(read, reading)
         if span is None:
             return []
         domain = _domain(properties, "", reading)
-        return [Bar(test, host, domain, span[0], span[1], final, target)]
+        return [Bar(test, host, domain, span[0], span[1], final, target, machine=machine)]
     said = properties.get(ATTEMPTS_PROPERTY, "").strip()
     total = reading.count(ATTEMPTS_PROPERTY, said) if said else 1
     # Only the attempts the file kept (a long series keeps the first and last few): the
@@ -132,9 +140,16 @@ def bars_of(
                 waits[0],
                 waits[1],
                 _value(properties, prefix, "resources"),
+                machine,
             )
         )
     return bars
+
+
+def machine_of(properties: dict[str, str], host: str) -> str:
+    """The machine a result ran on: ``shard 2/4 · host`` in a split, else the host."""
+    share = properties.get(SHARD_PROPERTY, "").strip()
+    return " · ".join(filter(None, (f"shard {share}" if share else "", host)))
 
 
 def _value(properties: dict[str, str], prefix: str, name: str) -> str:
@@ -258,10 +273,11 @@ def write_timeline(bars: list[Bar], put: Callable[[str], object]) -> None:
     span = max(high - low, 1e-3)
     # A file that names no host (other producers') is on the one host, when there is one.
     hosts = {bar.host for bar in bars if bar.host}
-    several = len(hosts) > 1
+    machines = {bar.machine for bar in bars if bar.machine}
+    several = len(machines) > 1
     rows: dict[tuple[str, int, str], list[Bar]] = {}
     for bar in bars:
-        key = (bar.host if several else "", 0 if bar.domain else 1, bar.domain.zfill(4))
+        key = (bar.machine if several else "", 0 if bar.domain else 1, bar.domain.zfill(4))
         rows.setdefault(key, []).append(bar)
 
     def pos(when: float) -> str:
@@ -273,14 +289,15 @@ def write_timeline(bars: list[Bar], put: Callable[[str], object]) -> None:
     put(head)
     put(
         f'<div id=timeline data-t0="{t0:.6f}" data-low="{low - t0:.6f}" '
-        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}"><div class=tgrid>'
+        f'data-high="{high - t0:.6f}" data-hosts="{len(hosts)}" '
+        f'data-machines="{len(machines)}"><div class=tgrid>'
     )
     for tick in _ticks(low - t0, high - t0):
         # A label at the right edge would be cut: its line alone says enough.
         label = _tick_label(tick) if (t0 + tick - low) / span < 0.95 else ""
         put(f'<div class=tick style="left:{pos(t0 + tick)}"><span>{label}</span></div>')
     put("</div><div class=taxis></div>")
-    for (host, _, _), members in sorted(rows.items()):
+    for (machine, _, _), members in sorted(rows.items()):
         members.sort(key=lambda bar: (bar.start, bar.end))
         lanes: list[float] = []
         placed: list[tuple[Bar, int]] = []
@@ -294,12 +311,14 @@ def write_timeline(bars: list[Bar], put: Callable[[str], object]) -> None:
         domain = members[0].domain
         name = f"ID {domain}" if domain else "no domain ID"
         if several:
-            name = f"{host or '(host not recorded)'} · {name}"
+            name = f"{machine or '(host not recorded)'} · {name}"
         clash = " clash" if domain and len(lanes) > 1 else ""
         title = " (used by two tests at once)" if clash else ""
+        host = members[0].host if several else ""
         put(
             f'<div class="trow{clash}" data-row="{attr(name)}" data-host="{attr(host)}" '
-            f'data-domain="{attr(domain)}"><div class=tlabel title="{attr(name + title)}">'
+            f'data-machine="{attr(machine)}" data-domain="{attr(domain)}">'
+            f'<div class=tlabel title="{attr(name + title)}">'
             f'{text(name, 128)}</div><div class=tlane style="--lanes:{len(lanes)}">'
         )
         for bar, lane in placed:
@@ -358,8 +377,8 @@ def _card(bar: Bar, t0: float) -> str:
     attempt = f"attempt {bar.attempt} of {_of(bar)}: " if bar.attempts != 1 else ""
     lines.append(f"{attempt}{_STATE_WORDS.get(bar.state, bar.state)}")
     where = f"ROS_DOMAIN_ID {bar.domain}" if bar.domain else "no domain ID of ours"
-    if bar.host:
-        where += f" on {bar.host}"
+    if bar.machine:
+        where += f" on {bar.machine}"
     lines.append(where)
     lines.append(f"ran {bar.end - bar.start:.2f} s, from +{bar.start - t0:.2f} s")
     if bar.wait_domain or bar.wait_resources:

@@ -2,6 +2,7 @@
 
 Failed-then-not-run and flaky cases are listed apart after the files, with their failed
 attempts under ``--verbose``; ``--json`` says the same with every failed and flaky case.
+A split's merged trees (``shards``) add the shares found and what is wrong with them.
 Names are shown as ``status`` shows them: a file name cannot forge a line.
 
 Written in bounded memory however many cases fail: each file's lines (or JSON row) and
@@ -22,6 +23,7 @@ from ros_isolated_test.report.counts import (
     not_run_again,
     summary_line,
 )
+from ros_isolated_test.report.shards import Split
 from ros_isolated_test.report.spool import Spool
 from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.text import display_text
@@ -43,6 +45,8 @@ class TextReport:
         self._not_run = Spool()
         self._flaky = Spool()
         self._rows = 0
+        #: What the trees say of a split, when the caller gathers it (said last).
+        self.split: Split | None = None
 
     def __enter__(self) -> TextReport:
         return self
@@ -124,7 +128,8 @@ class TextReport:
             put('{\n  "files": [')
             self._files.copy_text(put)
             totals = json.dumps(self.total.as_dict(), indent=2).replace("\n", "\n  ")
-            put(f'{chr(10) + "  " if self._rows else ""}],\n  "total": {totals}\n}}\n')
+            put(f'{chr(10) + "  " if self._rows else ""}],\n  "total": {totals}')
+            put(f"{self._json_split()}\n}}\n")
             return
         self._files.copy_text(put)
         total = self.total
@@ -142,6 +147,34 @@ class TextReport:
             self._flaky.copy_text(put)
         summary = summary_line(total.tests, total.errors, total.failures, total.skipped)
         put(f"\nSummary: {summary}\n")
+        self._write_split(put)
+
+    def _json_split(self) -> str:
+        """The ``shards`` member of ``--json``: the shares found and the split's problems."""
+        split = self.split
+        if split is None or not split.is_split:
+            return ""
+        shares = [
+            {"shard": share, "plan": plan, "hosts": hosts} for share, plan, hosts in split.shares()
+        ]
+        said = json.dumps({"found": shares, "problems": split.problems}, indent=2)
+        return ',\n  "shards": ' + said.replace("\n", "\n  ")
+
+    def _write_split(self, put: Callable[[str], object]) -> None:
+        """The shares found, then each problem of the split: the summary may be short."""
+        split = self.split
+        if split is None or not split.is_split:
+            return
+        shares = ", ".join(
+            f"{share} (plan {plan})" if index == 0 or plan != found[index - 1][1] else share
+            for found in [split.shares()]
+            for index, (share, plan, _hosts) in enumerate(found)
+        )
+        problems = split.problems
+        put(f"Shards: {shares or 'none'}\n")
+        if problems:
+            put(f"The split's results are incomplete ({len(problems)} problem(s)):\n")
+            put("".join(f"- {line}\n" for line in problems))
 
 
 def _shown_path(path: Path) -> str:

@@ -4,7 +4,8 @@ Canonical and raw producer files alike are read through the same reader and norm
 the runner uses, so the counts are the ones a canonical file of it would carry. A
 folder that cannot be read is an error, never a quiet gap. Each file is handed on
 (:func:`read_tree`) and forgotten before the next is read: what a reader keeps of it is
-its own business, so a tree of any size costs what its largest file costs.
+its own business, so a tree of any size costs what its largest file costs. The same
+walk finds the records a split's machines leave (``shard.record``), for the merge.
 """
 
 from __future__ import annotations
@@ -14,10 +15,13 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from ros_isolated_test.report.counts import FileReport, counted
+from ros_isolated_test.shard.record import is_record
+from ros_isolated_test.shard.selection import SHARD_PROPERTY
 from ros_isolated_test.text import display_text
 from ros_isolated_test.xunit import normalise, raw, reader
 from ros_isolated_test.xunit.canonical import test_name_of
 from ros_isolated_test.xunit.model import Case, Outcome
+from ros_isolated_test.xunit.normalise import NO_CASES_TYPE
 
 
 class FileRead:
@@ -38,24 +42,34 @@ class FileRead:
         return self.report.path
 
 
-def read_tree(paths: Iterable[Path]) -> Iterator[FileRead]:
-    """Each result file under ``paths`` read, and each folder it could not read, in order."""
-    for item in result_files(paths):
+def read_tree(paths: Iterable[Path], records: list[Path] | None = None) -> Iterator[FileRead]:
+    """Each result file under ``paths`` read, and each folder it could not read, in order.
+
+    ``records``: where the split records found on the way are put (:func:`result_files`).
+    """
+    for item in result_files(paths, records):
         if isinstance(item, OSError):
             yield unreadable_folder(item)
         elif (found := read_file(item)) is not None:
             yield found
 
 
-def result_files(paths: Iterable[Path]) -> Iterator[Path | OSError]:
+def result_files(
+    paths: Iterable[Path], records: list[Path] | None = None
+) -> Iterator[Path | OSError]:
     """``*.xml`` under each path, in a stable order; hidden folders skipped, as colcon does.
 
     A folder that cannot be listed (no read or search permission) comes as its error,
-    where its files would have come: what it holds may be the one failure.
+    where its files would have come: what it holds may be the one failure. The records
+    of a split's machines (``ros_isolated_test_shard-<I>-of-<N>.json``) met on the way
+    are appended to ``records``, when it is given.
     """
     for path in paths:
         if path.is_file():
-            yield path
+            if not is_record(path.name):
+                yield path
+            elif records is not None:
+                records.append(path)
             continue
         errors: list[OSError] = []
         for folder, dirs, files in os.walk(path, onerror=errors.append):
@@ -64,6 +78,8 @@ def result_files(paths: Iterable[Path]) -> Iterator[Path | OSError]:
             for name in sorted(files):
                 if name.endswith(".xml"):
                     yield Path(folder) / name
+                elif records is not None and is_record(name):
+                    records.append(Path(folder) / name)
         yield from _taken(errors)
 
 
@@ -88,9 +104,21 @@ def unreadable_folder(error: OSError) -> FileRead:
 
 
 def read_file(path: Path) -> FileRead | None:
-    """One file read and counted; None for XML that is not a test result (a ctest Test.xml)."""
+    """One file read and counted; None for XML that is not a test result (a ctest Test.xml).
+
+    A file of no test cases counts as one skip saying nothing was tested, unless it is
+    a split's share that held none of that package's tests (pytest's file of a session
+    whose items all went to other shares): that share ran nothing there, by design.
+    """
     read = reader.read(path)
     if read.root_tag is not None and not read.is_xunit:
         return None
     cases = normalise.cases_from(read, None, test_name_of(path))
+    if (
+        not read.cases
+        and len(cases) == 1
+        and cases[0].type == NO_CASES_TYPE
+        and any(SHARD_PROPERTY in suite.properties for suite in read.suites)
+    ):
+        cases = []
     return FileRead(counted(path, cases), cases, read)

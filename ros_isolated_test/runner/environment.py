@@ -29,6 +29,7 @@ from ros_isolated_test.runner.settings import (
     disables_isolation,
     isolation_from,
 )
+from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -213,6 +214,10 @@ def decide(
     # The test holds what its runner asked for: a runner inside it asking again would wait
     # for what its own parent holds.
     env.pop(RESOURCES_ENV, None)
+    # The split is this runner's to decide, for the whole test: a runner or the pytest
+    # plugin inside it would split the test's own tests again, over the same shares.
+    env.pop(SHARD_ENV, None)
+    env.pop(DURATIONS_ENV, None)
     assigned = any(item.name == DISABLE_VAR and not item.append for item in assignments)
     if assigned:
         disabled, origin = disables_isolation(env.get(DISABLE_VAR)), f" (by {env_origin})"

@@ -16,6 +16,10 @@ FAILED = 1
 USAGE = 2
 #: Nothing was run: no domain ID could be reserved (pool exhausted, lock dir unusable).
 NO_DOMAIN = 3
+#: Not run: the test is another share's of a split (``ROS_ISOLATED_TEST_SHARD``), when
+#: it has no skip code of its own. Automake's and ctest's convention for "skipped": the
+#: CMake include and macros set ctest's SKIP_RETURN_CODE to it.
+NOT_HERE = 77
 #: The runner's own ``--timeout`` ended the test (the convention of timeout(1)).
 TIMEOUT = 124
 #: The command exists but could not be executed (shell convention).

@@ -16,6 +16,7 @@ from ros_isolated_test.xunit.canonical import test_name_of
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from ros_isolated_test.runner.settings import Settings
+    from ros_isolated_test.shard.selection import Selection
 
 __all__ = [
     "EnvAssignment",
@@ -69,6 +70,7 @@ class RunRequest:
         "package_name",
         "result_file",
         "settings",
+        "shard",
         "skip_return_code",
         "skip_test",
         "timeout",
@@ -90,6 +92,7 @@ class RunRequest:
         timeout: float | None = None,
         kill_grace: float = KILL_GRACE,
         env_origin: str = "--env",
+        shard: Selection | None = None,
     ) -> None:
         self.command = command
         self.mode = mode
@@ -107,6 +110,9 @@ class RunRequest:
         self.settings = settings
         #: Where the assignments in ``env`` came from, for messages (``--env`` or ``ENV``).
         self.env_origin = env_origin
+        #: This machine's share of a split (``ROS_ISOLATED_TEST_SHARD``), read once by the
+        #: entry point; None: no split, every test runs.
+        self.shard = shard
 
     def command_writing_to(self, own_result: Path) -> tuple[str, ...]:
         """The command with the result path it names pointed at ``own_result`` instead.

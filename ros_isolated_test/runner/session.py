@@ -4,6 +4,8 @@ Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds
 :class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`. Read it
 as the table of contents of a run; each step lives in a module of its own:
 
+0. ``share``: in a split, a test of another share is not run at all (nothing reserved,
+   no result file); this share's tests record it;
 1. ``streams``: the console and the --output-file, or one line saying why not;
 2. the result file (``xunit.result_file``): stale files gone, a placeholder in place;
 3. ``environment``: the policy (refusing a preset ROS_DOMAIN_ID, for one);
@@ -23,7 +25,7 @@ from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
 from ros_isolated_test.domain_coordinator.resource_holds import CapacityConflictError
 from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
-from ros_isolated_test.runner import environment, exit_codes, settings, streams
+from ros_isolated_test.runner import environment, exit_codes, settings, share, streams
 from ros_isolated_test.runner.attempt import attempt
 from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.interruption import Guard, Interrupted, interruptible
@@ -45,6 +47,9 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     streams.keep_standard_descriptors()
     console = console if console is not None else streams.console()
     result = _result_file(request)
+    elsewhere = share.decide(request, result, console)
+    if elsewhere is not None:
+        return elsewhere
     try:
         result.prepare()
     except OSError as error:
@@ -77,7 +82,8 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
         finally:
             both.close()
     # A result or output file that could not be written is a failed run, never a silent pass.
-    return exit_codes.final(code, result.write_error, both.capture.file_error)
+    code = exit_codes.final(code, result.write_error, both.capture.file_error)
+    return share.exit_code(request, code, console)
 
 
 def _decided(

@@ -44,7 +44,7 @@ from operator import mul
 from ros_isolated_test import atomic_file
 from ros_isolated_test.shard.digest import sha256
 from ros_isolated_test.shard.identity import SEPARATOR, IdentityError, split
-from ros_isolated_test.shard.spec import ShardSettingError, named
+from ros_isolated_test.shard.spec import DURATIONS_ENV, ShardSettingError, named
 from ros_isolated_test.text import display_text
 
 TYPE_CHECKING = False  # no typing import on a test's path
@@ -52,7 +52,6 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Mapping
     from pathlib import Path
 
-DURATIONS_ENV = "ROS_ISOLATED_TEST_DURATIONS"
 #: The file format this version writes and reads.
 VERSION = 1
 #: The longest duration a file may give: a week is no test's duration, but a unit slip.

@@ -19,8 +19,11 @@ from __future__ import annotations
 from ros_isolated_test.shard.digest import sha256
 
 SEPARATOR = "/"
+#: The testcase property a pytest item's identity is recorded under in pytest's
+#: ``--junit-xml`` file (the plugin adds it), so ``report --durations`` can name the item.
+PROPERTY = "ros_isolated_test_identity"
 
-__all__ = ["SEPARATOR", "IdentityError", "identity", "split", "spread"]
+__all__ = ["PROPERTY", "SEPARATOR", "IdentityError", "identity", "split", "spread"]
 
 
 class IdentityError(ValueError):

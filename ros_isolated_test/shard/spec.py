@@ -20,12 +20,16 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
 SHARD_ENV = "ROS_ISOLATED_TEST_SHARD"
+#: The durations file the split balances by (``shard.durations`` reads it); named here,
+#: beside the share, so what only needs the names loads nothing more.
+DURATIONS_ENV = "ROS_ISOLATED_TEST_DURATIONS"
 #: The most shares one split may have.
 MAX_TOTAL = 1000
 #: What a value must look like, said in every error.
 FORM = "I/N: share I of N, I from 1 to N, N at most 1000 (e.g. 2/4)"
 
 __all__ = [
+    "DURATIONS_ENV",
     "FORM",
     "MAX_TOTAL",
     "SHARD_ENV",

@@ -3,8 +3,9 @@
 The parser's target. It knows the shapes producers write (``testsuites``, ``testsuite``
 and ``testcase`` with their failure, error and skipped elements; the ``status`` and
 ``result`` attributes of gtest's and ctest's disabled tests; a suite's ``<property>``
-elements; Surefire's rerun and flaky elements, with an attempt's own output) and keeps
-only what the normaliser reads. Apart from the stages before it (``sanitiser``,
+elements, and of a case's only its identity (``shard.identity.PROPERTY``); Surefire's
+rerun and flaky elements, with an attempt's own output) and keeps only what the
+normaliser reads. Apart from the stages before it (``sanitiser``,
 ``safe_parser``) because it sees elements, never bytes: its bounds are on what is kept
 (cases, outcomes, texts, names, depth, what entities add).
 """
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 from typing import cast
 
+from ros_isolated_test.shard.identity import PROPERTY as IDENTITY_PROPERTY
 from ros_isolated_test.text import BoundedText, bounded
 from ros_isolated_test.xunit.raw import RawCase, RawOutcome, RawSuite, ReadResult
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT
@@ -51,6 +53,7 @@ _OUTCOME_KEYS = frozenset({"message", "type"})
 
 _ATTEMPT_TAGS = frozenset({"rerunFailure", "rerunError", "flakyFailure", "flakyError"})
 _IN_PROPERTIES = ["testsuite", "properties"]
+_IN_CASE_PROPERTIES = ["testcase", "properties"]
 OUTCOME_TAGS = frozenset({"failure", "error", "skipped"}) | _ATTEMPT_TAGS
 #: What entities may add to the text and markup the parser reports: ENTITY_BUDGET
 #: characters, and beyond that EXPANSION_FACTOR times what the parser was given. That
@@ -204,6 +207,9 @@ class Builder:
                 self.dropped_suites += 1
         elif name == "property" and self.case is None and self.stack[-3:-1] == _IN_PROPERTIES:
             self._property(attrib)
+        elif name == "property" and self.case is not None:
+            if self.stack[-3:-1] == _IN_CASE_PROPERTIES:
+                self._case_property(self.case, attrib)
         elif name == "testcase" and self.case is None and not self.in_counted_case:
             self._start_case(attrib)
         elif self.in_counted_case and parent == "testcase" and name in OUTCOME_TAGS:
@@ -226,6 +232,12 @@ class Builder:
         attrs = self.budget.attrs(attrib, _PROPERTY_KEYS)
         if "name" in attrs:
             properties.setdefault(attrs["name"], attrs.get("value", ""))
+
+    def _case_property(self, case: RawCase, attrib: object) -> None:
+        """A case's property: only its identity is kept (the first one it names)."""
+        attrs = self.budget.attrs(attrib, _PROPERTY_KEYS, self.further)
+        if attrs.get("name") == IDENTITY_PROPERTY and not case.identity:
+            case.identity = attrs.get("value", "")
 
     def _start_case(self, attrib: object) -> None:
         suite_name = self.suites[-1].name if self.suites else ""

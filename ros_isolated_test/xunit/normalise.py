@@ -112,6 +112,10 @@ def _skipped(raw: RawCase) -> bool:
     return raw.attrs.get("status") == "disabled" or raw.attrs.get("result") == "suppressed"
 
 
+#: The type of :func:`no_cases`'s case.
+NO_CASES_TYPE = "NoTestCases"
+
+
 def no_cases(classname: str) -> Case:
     """The one case of a result that holds none, so every reader shows that nothing ran.
 
@@ -123,7 +127,7 @@ def no_cases(classname: str) -> Case:
         "The result file reports no test cases: nothing was tested. An empty test "
         "selection or discovery is usually a mistake in the test's configuration."
     )
-    return Case.saying(classname, "no test cases", Outcome.SKIPPED, message, "NoTestCases")
+    return Case.saying(classname, "no test cases", Outcome.SKIPPED, message, NO_CASES_TYPE)
 
 
 def _count(attrs: dict[str, str], *names: str) -> int:

@@ -37,6 +37,11 @@ class RawCase:
     system_err: str = ""
     #: False when the file ended (or reading stopped) inside this case.
     complete: bool = True
+    #: The test's identity across machines (``<package>/<node id>``), from the case's
+    #: ``ros_isolated_test_identity`` property that the pytest plugin adds: kept here
+    #: only, for ``report --durations`` and a split's merge (the canonical schema has no
+    #: testcase properties). "" when the case has none.
+    identity: str = ""
 
 
 @dataclass(slots=True)

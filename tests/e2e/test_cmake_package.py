@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import re
 import subprocess
 import sys
 import zipfile
@@ -281,6 +282,44 @@ def test_ros_isolated_add_test_finds_ament_cmake_test_as_the_other_macros_find_t
     control = _configure(tmp_path / "control", "ament_add_test(alone COMMAND true)\n", ament="")
     assert control.returncode != 0, control.stdout
     assert "Unknown CMake command" in control.stderr, control.stderr
+
+
+def _skip_codes(build: Path) -> dict[str, str | None]:
+    """Each test's SKIP_RETURN_CODE in a CTestTestfile.cmake (None: none set)."""
+    found: dict[str, str | None] = {}
+    for line in (build / "CTestTestfile.cmake").read_text().splitlines():
+        named = re.match(r"^set_tests_properties\(\[=\[([^\]]+)\]=\] PROPERTIES (.*)\)$", line)
+        if named:
+            code = re.search(r' SKIP_RETURN_CODE "(\d+)"', f" {named[2]}")
+            found[named[1]] = code[1] if code else None
+    return found
+
+
+def test_every_test_of_ours_is_skipped_by_ctest_on_77_unless_it_has_its_own_code(
+    tmp_path: Path,
+) -> None:
+    """In a split the RUNNER exits 77 for a test of another share: ctest must show it
+    skipped. The macros and ros_isolated_test_all() give every test they register that
+    SKIP_RETURN_CODE, unless it has its own; a test with another RUNNER gets none."""
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "test_x.py").write_text("def test_x() -> None:\n    pass\n")
+    done = _configure(
+        tmp_path,
+        "ros_isolated_add_test(plain COMMAND true)\n"
+        "ros_isolated_add_test(own_code COMMAND true SKIP_RETURN_CODE 4)\n"
+        "ros_isolated_add_test(skipped COMMAND true SKIP_TEST)\n"
+        "ros_isolated_add_pytest_test(py test_x.py)\n"
+        "ament_add_test(by_hand COMMAND true)\n"
+        "ros_isolated_test_all()\n"
+        "ament_add_test(wrapped COMMAND true)\n"
+        'ament_add_test(other COMMAND true RUNNER "${ament_cmake_test_DIR}/run_test.py")\n',
+    )
+    assert done.returncode == 0, done.stderr
+    assert _skip_codes(tmp_path / "build") == {
+        "plain": "77", "own_code": "4", "skipped": "0", "py": "77",
+        "by_hand": None,  # before ros_isolated_test_all(), no macro: ament's runner, the control
+        "wrapped": "77", "other": None,
+    }  # fmt: skip
 
 
 def test_no_runner_is_a_clear_configure_error(tmp_path: Path) -> None:

@@ -92,6 +92,30 @@ def test_a_passing_test_without_own_result_file_loads_nothing_heavy(
     assert result.is_file()
 
 
+@pytest.mark.parametrize("share", ["1/2", "2/2"])
+def test_a_split_by_count_loads_nothing_heavy_on_either_share(
+    runner_script: str, env: dict[str, str], tmp_path: Path, share: str
+) -> None:
+    """Every machine of a split starts every test's RUNNER: the share that skips the test
+    and the one that runs it both stay lean (the hash needs no OpenSSL, the record no json)."""
+    result = tmp_path / "pkg" / "t.xml"
+    args = [str(result), "--package-name", "pkg", "--generate-result-on-success"]
+    given = {**env, "ROS_ISOLATED_TEST_SHARD": share}
+    proc = subprocess.run(
+        [sys.executable, "-X", "importtime", "-u", runner_script, *args, "--command", "true"],
+        env=given, cwd=tmp_path, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert proc.returncode in (0, 77), proc.stdout + proc.stderr  # this share's, or another's
+    names = {
+        line.rsplit("|", 1)[1].strip()
+        for line in proc.stderr.splitlines()
+        if line.startswith("import time:") and "|" in line
+    }
+    assert _heavy(names, _baseline(env)) == []
+    assert "ros_isolated_test.shard.plan" in names, "the check must see the split decided"
+    assert (tmp_path / "pkg" / f"ros_isolated_test_shard-{share[0]}-of-2.json").is_file()
+
+
 def test_a_test_with_its_own_result_file_loads_lxml_to_read_and_validate_it(
     runner_script: str, env: dict[str, str], tmp_path: Path
 ) -> None:

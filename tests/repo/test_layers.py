@@ -35,6 +35,7 @@ PACKAGE = REPO / "ros_isolated_test"
 LAYERS = (
     {
         "cli": "cli",
+        "cli_report": "cli",
         "cli_shard": "cli",
         "__main__": "cli",
         "pytest_plugin": "pytest plugin",

@@ -6,12 +6,14 @@ everything after ``--command`` is the test's command line, options included.
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ros_isolated_test.runner import exit_codes, session, settings
+from ros_isolated_test.runner import exit_codes, session, settings, share
 from ros_isolated_test.runner.request import EnvAssignment, Mode, RunRequest
+from ros_isolated_test.shard.spec import ShardSettingError
 
 PROG = "run_test_isolated.py"
 DESCRIPTION = (
@@ -30,6 +32,9 @@ EPILOG = (
     "machine resources the test holds with its ID, waiting until they are free; "
     "ROS_ISOLATED_TEST_CAPACITY: how much of each the machine has (default: its CPUs, its "
     "memory, 1 of any other name); "
+    "ROS_ISOLATED_TEST_SHARD=I/N: run only share I of N of the tests (a test of another "
+    "share is not run and exits with its skip code, else 77), balanced by "
+    "ROS_ISOLATED_TEST_DURATIONS=FILE (absolute; else by count); "
     "ROS_ISOLATED_TEST_ISOLATION=domain|namespace|auto (also in --env / ENV, which wins): "
     "namespace runs the test in a network, /dev/shm and IPC of its own too, never waiting "
     "for an ID."
@@ -262,8 +267,11 @@ def parse(argv: Sequence[str]) -> RunRequest:
             ),
             generate_result_on_success="--generate-result-on-success" in single,
             env_origin="--env (ament_add_test ENV)",
+            # The split from the environment only: ctest runs every test of a machine
+            # with the same one (a test's ENV naming a share would split nothing).
+            shard=share.read(os.environ),
         )
-    except (UsageError, settings.SettingsError) as error:
+    except (UsageError, settings.SettingsError, ShardSettingError) as error:
         # Only what the user can fix: any other error is a bug, and must show as one.
         raise UsageError(str(error), result_file) from None
 

@@ -196,3 +196,39 @@ def test_nonexistent_path_is_a_usage_error(env: dict[str, str], tmp_path: Path) 
     assert "no-such-folder" in proc.stderr
     assert "does not exist" in proc.stderr
     assert "Summary" not in proc.stdout
+
+
+# --- a split's trees -----------------------------------------------------------------------------
+
+
+def test_a_share_that_held_none_of_a_packages_tests_counts_none(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """pytest's file of a share whose items all went elsewhere: nothing ran there, by design.
+    The control: a file of no cases that names no share is one skip saying so."""
+    empty = '<testsuites><testsuite name="pytest" tests="0">{}</testsuite></testsuites>'
+    share = '<properties><property name="shard" value="2/3"/></properties>'
+    (tmp_path / "split" / "pkg").mkdir(parents=True)
+    (tmp_path / "split" / "pkg" / "pytest.xml").write_text(empty.format(share))
+    (tmp_path / "plain" / "pkg").mkdir(parents=True)
+    (tmp_path / "plain" / "pkg" / "pytest.xml").write_text(empty.format(""))
+    split = run_cli(["report", str(tmp_path / "split")], {**env, "ROS_ISOLATED_TEST_SHARD": "2/3"})
+    assert "Summary: 0 tests, 0 errors, 0 failures, 0 skipped" in split.stdout, split.stdout
+    plain = run_cli(["report", str(tmp_path / "plain")], env)
+    assert "Summary: 1 tests, 0 errors, 0 failures, 1 skipped" in plain.stdout, plain.stdout
+
+
+def test_the_records_of_a_split_are_found_and_never_read_as_results(tmp_path: Path) -> None:
+    from ros_isolated_test.report.tree import result_files
+
+    folder = tmp_path / "pkg" / "test_results" / "pkg"
+    folder.mkdir(parents=True)
+    (folder / "t.xml").write_text("<testsuite/>")
+    (folder / "ros_isolated_test_shard-1-of-2.json").write_text("{}")
+    (folder / "other.json").write_text("{}")
+    records: list[Path] = []
+    assert list(result_files([tmp_path], records)) == [folder / "t.xml"]
+    assert records == [folder / "ros_isolated_test_shard-1-of-2.json"]
+    given: list[Path] = []
+    assert list(result_files([folder / "ros_isolated_test_shard-1-of-2.json"], given)) == []
+    assert given == [folder / "ros_isolated_test_shard-1-of-2.json"]

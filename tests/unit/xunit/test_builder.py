@@ -100,6 +100,20 @@ def test_a_suites_properties_are_kept_and_a_cases_are_not() -> None:
     assert "in_case" not in properties and "bare" not in properties
     assert len(properties) == MAX_PROPERTIES
     assert [case.attrs["name"] for case in result.cases] == ["a"]
+    assert result.cases[0].identity == ""
+
+
+def test_of_a_cases_properties_only_its_identity_is_kept() -> None:
+    """The pytest plugin names each item (``ros_isolated_test_identity``) for a split."""
+    result = built(
+        '<testsuite name="s"><testcase classname="C" name="a"><properties>'
+        '<property name="other" value="x"/>'
+        '<property name="ros_isolated_test_identity" value="pkg/test/t.py::a"/>'
+        '<property name="ros_isolated_test_identity" value="pkg/second"/>'
+        '</properties></testcase><testcase classname="C" name="b"/></testsuite>'
+    )
+    assert [case.identity for case in result.cases] == ["pkg/test/t.py::a", ""]
+    assert result.suites[0].properties == {}
 
 
 def test_surefire_attempts_keep_their_own_output_apart_from_their_text() -> None:

@@ -1,0 +1,110 @@
+"""Which tests a result file holds, by identity, and how long each took: a split's inputs.
+
+A split names tests by identity (``shard.identity``), and a result file names them in
+one of two ways:
+
+- **a runner's file** (one suite, ``<package>.<test>``, with our ``runner_version``): the
+  ctest test ``<test>`` of ``<package>``, as the RUNNER decided for it; it took its
+  ``duration`` property (the last attempt's run, what a rerun-free run takes), else the
+  suite's time. A file that says the test was not run measured nothing.
+- **pytest's own file, written under the plugin**: each case that carries the
+  ``ros_isolated_test_identity`` property is the item it names; it took the case's time.
+
+Anything else (another producer's file, a case without the property) names no test a
+split places, and is left out. ``report --durations`` writes these durations
+(:class:`Gathered`), ``shard --plan TREE`` shows the tests, and the merge of a split's
+trees counts them.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ros_isolated_test.report.tree import FileRead
+from ros_isolated_test.shard.durations import Durations, measured, merge
+from ros_isolated_test.shard.identity import SEPARATOR, IdentityError, identity, split
+from ros_isolated_test.xunit.canonical import test_name_of
+
+#: The suite property a runner records its test's run time in (``runner.verdict``).
+DURATION_PROPERTY = "duration"
+
+__all__ = ["Gathered", "named_tests"]
+
+
+def _seconds(text: str) -> float | None:
+    """``text`` as a duration a file may keep, else None (it measured nothing usable)."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) and 0 <= value <= 7 * 24 * 3600 else None
+
+
+def named_tests(item: FileRead) -> list[tuple[str, float | None]]:
+    """Each test the file holds, by identity, with its seconds (None: not measured)."""
+    read = item.read
+    if read is None:
+        return []
+    suites = read.suites
+    if len(suites) == 1 and "runner_version" in suites[0].properties:
+        return _runner_test(item)
+    found: list[tuple[str, float | None]] = []
+    for case in read.cases:
+        if not case.identity:
+            continue
+        try:
+            split(case.identity)
+        except IdentityError:
+            continue  # not one a split could have placed
+        found.append((case.identity, _seconds(case.attrs.get("time", ""))))
+    return found
+
+
+def _runner_test(item: FileRead) -> list[tuple[str, float | None]]:
+    """The one test of a runner's file: ``<package>.<test>``, its name from the file's."""
+    assert item.read is not None
+    suite = item.read.suites[0]
+    test = test_name_of(item.path)
+    package = suite.name.removesuffix(f".{test}")
+    if package == suite.name or not package or SEPARATOR in package:
+        return []
+    properties = suite.properties
+    seconds = None
+    if properties.get("exit") != "not run":
+        said = properties.get(DURATION_PROPERTY) or suite.attrs.get("time", "")
+        seconds = _seconds(said)
+    return [(identity(package, test), seconds)]
+
+
+class Gathered:
+    """The durations of the tests of one or more runs' trees, file by file.
+
+    A test measured more than once (trees of several runs) keeps the median of its
+    measurements, as :func:`~ros_isolated_test.shard.durations.merge` takes it: the
+    shards of one run measure disjoint tests, so their merge is their union.
+    """
+
+    def __init__(self) -> None:
+        self._samples: dict[str, list[float]] = {}
+        #: Result files read, and those that named a measured test.
+        self.files = 0
+        self.measuring = 0
+
+    def add(self, item: FileRead) -> None:
+        """One file read: its measured tests kept."""
+        self.files += 1
+        measured_here = False
+        for key, seconds in named_tests(item):
+            if seconds is not None:
+                self._samples.setdefault(key, []).append(seconds)
+                measured_here = True
+        self.measuring += measured_here
+
+    def durations(self) -> Durations:
+        """Every test measured: the median of its measurements, as the file keeps it."""
+        rounds = max(map(len, self._samples.values()), default=0)
+        runs = [
+            measured({key: values[k] for key, values in self._samples.items() if len(values) > k})
+            for k in range(rounds)
+        ]
+        return merge(runs)

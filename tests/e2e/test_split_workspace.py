@@ -1,0 +1,307 @@
+"""A workspace split over three CI machines, each running its share; one merge reads them all.
+
+One colcon workspace, built once with the zero-edit recipe: two ament_cmake packages
+(plain ``ament_add_test`` tests, and an ``ament_add_pytest_test`` run through the RUNNER)
+and an ament_python package of pytest items, none of which mentions ros-isolated-test.
+Tested once whole, then as three machines would (``ROS_ISOLATED_TEST_SHARD=I/3``, the
+durations file written by ``report --durations`` from the whole run), one after another
+on the one build, each machine's results copied away as CI uploads them (the results of
+the last run stay in the build, as a build folder restored from a cache holds them: a
+test of another share must clear its own). Then the merge: each test ran in exactly one
+share, ctest showed the others skipped, the merged counts are the whole run's, the page
+shows every test once in Chromium; a share left out, or one run under another plan, is
+named and fails the merge.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from collections import Counter
+from collections.abc import Mapping
+from pathlib import Path
+
+import pytest
+from helpers import capabilities, chromium
+from helpers.commands import run_cli
+from helpers.domains import free_ids
+from helpers.report_page import parsed
+from helpers.workspace import crosstalk_workspace
+from lxml import etree, html
+
+from ros_isolated_test.report.measured import named_tests
+from ros_isolated_test.report.tree import read_tree
+from ros_isolated_test.shard.durations import load
+from ros_isolated_test.xunit import canonical
+
+pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark, capabilities.CTEST.mark]
+
+SHARES = 3
+CMAKE = {"split_a": 5, "split_b": 4}
+PYTHON = "split_py"
+#: Items of the ament_cmake package's pytest (one ctest test, run whole by one share).
+PYTEST_ITEMS = 4
+PY_ITEMS = 8
+TEST = "colcon test --parallel-workers 3 --ctest-args -j3"
+MANIFEST = """<?xml version="1.0"?>
+<package format="3">
+  <name>{name}</name><version>0.1.0</version><description>A split's package.</description>
+  <maintainer email="maintainer@example.com">Example Maintainer</maintainer>
+  <license>Apache-2.0</license>
+  <buildtool_depend>{build}</buildtool_depend>
+  <test_depend>ament_cmake_pytest</test_depend>
+  <export><build_type>{build}</build_type></export>
+</package>
+"""
+SETUP = """from setuptools import setup
+
+setup(
+    name="{name}",
+    version="0.1.0",
+    packages=[],
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/{name}"]),
+        ("share/{name}", ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    extras_require={{"test": ["pytest"]}},
+    zip_safe=True,
+)
+"""
+
+
+def _generate(src: Path) -> None:
+    """The packages: tests that sleep a little, some longer than others."""
+    for package, count in CMAKE.items():
+        folder = src / package
+        (folder / "test").mkdir(parents=True)
+        lines = [
+            "cmake_minimum_required(VERSION 3.15)",
+            f"project({package} NONE)",
+            "find_package(ament_cmake REQUIRED)",
+            "if(BUILD_TESTING)",
+        ]
+        for n in range(count):
+            lines.append(
+                f'  ament_add_test({package}_{n} COMMAND "${{Python3_EXECUTABLE}}" -c '
+                f"\"__import__('time').sleep({0.05 * n:.2f})\" "
+                "GENERATE_RESULT_FOR_RETURN_CODE_ZERO)"
+            )
+        if package == "split_b":
+            lines.append("  find_package(ament_cmake_pytest REQUIRED)")
+            lines.append("  ament_add_pytest_test(split_b_pytest test/test_items.py)")
+            (folder / "test" / "test_items.py").write_text(
+                "".join(f"def test_item_{n}():\n    pass\n\n" for n in range(PYTEST_ITEMS))
+            )
+        lines += ["endif()", "ament_package()", ""]
+        (folder / "CMakeLists.txt").write_text("\n".join(lines))
+        (folder / "package.xml").write_text(MANIFEST.format(name=package, build="ament_cmake"))
+    folder = src / PYTHON
+    (folder / "test").mkdir(parents=True)
+    (folder / "resource").mkdir()
+    (folder / "resource" / PYTHON).write_text("")
+    (folder / "setup.py").write_text(SETUP.format(name=PYTHON))
+    (folder / "package.xml").write_text(MANIFEST.format(name=PYTHON, build="ament_python"))
+    (folder / "test" / "test_py.py").write_text(
+        "import time\n\n"
+        + "".join(
+            f"def test_py_{n}():\n    time.sleep({0.02 * n:.2f})\n\n" for n in range(PY_ITEMS)
+        )
+    )
+
+
+class Split:
+    """The workspace, its one build, and the trees its runs left (copied as CI uploads them)."""
+
+    def __init__(self, root: Path, env: Mapping[str, str]) -> None:
+        self.root = root
+        ws = crosstalk_workspace()
+        self.env = ws.colcon_env(ws.Toolchain(base_env=dict(env)))
+        self.env["COLCON_HOME"] = str(root / "colcon-home")
+        self.env.pop("COLCON_DEFAULTS_FILE", None)
+        #: Each run's tree of results, and ctest's Test.xml per CMake package.
+        self.trees: dict[str, Path] = {}
+        self.ctest: dict[str, dict[str, etree._Element]] = {}
+
+    def shell(self, line: str, extra: Mapping[str, str] | None = None) -> str:
+        done = subprocess.run(
+            ["bash", "-c", line], cwd=self.root, env={**self.env, **(extra or {})},
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, check=False,
+        )  # fmt: skip
+        if done.returncode != 0:
+            raise AssertionError(f"{line} failed:\n{done.stdout}")
+        return done.stdout
+
+    def test(self, name: str, extra: Mapping[str, str] | None = None) -> Path:
+        """``colcon test`` once; its results copied to a tree of their own, as CI uploads them.
+
+        The results stay in the build (the next run meets them as a restored build folder
+        holds them); the machine's records go, as a fresh machine has none.
+        """
+        self.shell(TEST, extra)
+        build = self.root / "build"
+        tree = self.root / "trees" / name
+        for package in CMAKE:
+            shutil.copytree(build / package / "test_results", tree / package / "test_results")
+            tag = (build / package / "Testing" / "TAG").read_text().splitlines()[0]
+            self.ctest.setdefault(name, {})[package] = etree.parse(
+                str(build / package / "Testing" / tag / "Test.xml")
+            ).getroot()
+        (tree / PYTHON).mkdir(parents=True)
+        for found in (build / PYTHON).glob("*"):
+            if found.name == "pytest.xml" or found.name.startswith("ros_isolated_test_shard-"):
+                shutil.copy(found, tree / PYTHON / found.name)
+        for stale in build.glob("**/ros_isolated_test_shard-*.json"):
+            stale.unlink()
+        self.trees[name] = tree
+        return tree
+
+
+@pytest.fixture(scope="module")
+def split(tmp_path_factory: pytest.TempPathFactory, module_env: dict[str, str]) -> Split:
+    """Built once; tested whole, as three shares by its durations, and one share by count."""
+    root = tmp_path_factory.mktemp("split")
+    _generate(root / "src")
+    env = {**module_env, "ROS_ISOLATED_TEST_DOMAINS": ",".join(map(str, free_ids(8)))}
+    ws = Split(root, env)
+    ws.shell(
+        "colcon build --cmake-args -DCMAKE_PROJECT_INCLUDE=$(ros-isolated-test cmake-include) "
+        f"-DPython3_EXECUTABLE={sys.executable}"
+    )
+    ws.test("whole")
+    durations = root / "durations.json"
+    said = ws.shell(f"ros-isolated-test report --durations {durations} trees/whole")
+    assert said.startswith(f"{durations}: "), said
+    for index in range(1, SHARES + 1):
+        ws.test(
+            f"shard-{index}",
+            {
+                "ROS_ISOLATED_TEST_SHARD": f"{index}/{SHARES}",
+                "ROS_ISOLATED_TEST_DURATIONS": str(durations),
+            },
+        )
+    ws.test("by-count-2", {"ROS_ISOLATED_TEST_SHARD": f"2/{SHARES}"})
+    return ws
+
+
+def _identities(tree: Path) -> list[str]:
+    return [key for item in read_tree([tree]) for key, _seconds in named_tests(item)]
+
+
+def _shard_trees(split: Split) -> list[Path]:
+    return [split.trees[f"shard-{index}"] for index in range(1, SHARES + 1)]
+
+
+def test_each_test_ran_in_exactly_one_share(split: Split) -> None:
+    whole = _identities(split.trees["whole"])
+    expected = sum(CMAKE.values()) + 1 + PY_ITEMS  # the CMake pytest is one ctest test
+    assert len(whole) == len(set(whole)) == expected, whole
+    ran = [key for tree in _shard_trees(split) for key in _identities(tree)]
+    assert sorted(ran) == sorted(whole)
+    assert all(_identities(tree) for tree in _shard_trees(split)), "a share ran nothing"
+
+
+def test_the_shares_follow_the_plan_shard_plan_prints(split: Split) -> None:
+    """What each machine ran is what ``shard --plan`` shows before paying for them."""
+    durations = split.root / "durations.json"
+    assert set(load(durations).millis) == set(_identities(split.trees["whole"]))
+    plan = json.loads(
+        run_cli(
+            ["shard", "--plan", "--json", "--durations", str(durations), "--total", str(SHARES)],
+            split.env,
+        ).stdout
+    )
+    for share, tree in zip(plan["shares"], _shard_trees(split), strict=True):
+        assert sorted(test["identity"] for test in share["tests"]) == sorted(_identities(tree))
+
+
+def test_ctest_shows_the_other_shares_tests_skipped(split: Split) -> None:
+    for index, tree in enumerate(_shard_trees(split), start=1):
+        ran = set(_identities(tree))
+        for package, site in split.ctest[f"shard-{index}"].items():
+            for test in site.iterfind("Testing/Test"):
+                name = test.findtext("Name")
+                status = test.get("Status")
+                if f"{package}/{name}" in ran:
+                    assert status == "passed", (index, name, status)
+                else:
+                    assert status == "notrun", (index, name, status)
+                    completion = test.find(".//NamedMeasurement[@name='Completion Status']")
+                    said = completion.findtext("Value") if completion is not None else None
+                    assert said == "SKIP_RETURN_CODE=77", (index, name, said)
+        # No result file of another share's test stayed (the build held them all).
+        names = {canonical.test_name_of(path) for path in tree.glob("*/test_results/*/*.xml")}
+        assert names == {key.split("/", 1)[1] for key in ran if "::" not in key}
+
+
+def test_the_pytest_the_runner_ran_is_not_split_again(split: Split) -> None:
+    (result,) = [
+        path for tree in _shard_trees(split) for path in tree.glob("**/split_b_pytest.xunit.xml")
+    ]
+    cases = etree.parse(str(result)).getroot().findall(".//testcase")
+    assert len(cases) == PYTEST_ITEMS
+
+
+def _report(split: Split, *trees: Path, json_out: bool = True) -> subprocess.CompletedProcess[str]:
+    args = ["report", *(["--json"] if json_out else []), *map(str, trees)]
+    return run_cli(args, split.env)
+
+
+def test_the_merged_report_counts_what_the_whole_run_counted(split: Split) -> None:
+    whole = _report(split, split.trees["whole"])
+    merged = _report(split, *_shard_trees(split))
+    assert (whole.returncode, merged.returncode) == (0, 0), merged.stdout + merged.stderr
+    assert json.loads(merged.stdout)["total"] == json.loads(whole.stdout)["total"]
+    shards = json.loads(merged.stdout)["shards"]
+    assert [found["shard"] for found in shards["found"]] == ["1/3", "2/3", "3/3"]
+    assert shards["problems"] == []
+
+
+def _case_rows(page: html.HtmlElement) -> Counter[tuple[str, str]]:
+    rows = page.xpath(f"//section[@id='all']//tr[{chromium.with_class('c')}]")
+    return Counter((row.getparent().get("data-class"), row.findtext("td")) for row in rows)
+
+
+@capabilities.CHROMIUM.mark
+def test_the_merged_page_shows_every_test_once(split: Split) -> None:
+    whole_page, merged_page = split.root / "whole.html", split.root / "merged.html"
+    assert run_cli(["report", "--html", str(whole_page), str(split.trees["whole"])],
+                   split.env).returncode == 0  # fmt: skip
+    assert run_cli(["report", "--html", str(merged_page), *map(str, _shard_trees(split))],
+                   split.env).returncode == 0  # fmt: skip
+    dom = chromium.dump_dom(merged_page)
+    rows = _case_rows(dom)
+    assert set(rows.values()) == {1}, [row for row, count in rows.items() if count > 1]
+    assert rows == _case_rows(parsed(whole_page.read_text()))
+    machines = {
+        row.get("data-machine") for row in dom.xpath("//*[@id='timeline']//div[@data-machine]")
+    }
+    assert {machine.split(" · ")[0] for machine in machines} == {
+        "shard 1/3",
+        "shard 2/3",
+        "shard 3/3",
+    }
+    assert dom.xpath("//header//h1")[0].text == "PASSED"
+
+
+def test_a_share_left_out_fails_the_merge_naming_it(split: Split) -> None:
+    trees = _shard_trees(split)
+    short = _report(split, trees[0], trees[2], json_out=False)
+    assert short.returncode == 1
+    assert "- shard 2 of 3 left no results (no record ros_isolated_test_shard-2-of-3.json" in (
+        short.stdout
+    )
+
+
+def test_shares_run_from_different_durations_files_fail_the_merge(split: Split) -> None:
+    trees = _shard_trees(split)
+    mixed = _report(split, trees[0], split.trees["by-count-2"], trees[2])
+    assert mixed.returncode == 1
+    (problem,) = [
+        line for line in json.loads(mixed.stdout)["shards"]["problems"]
+        if line.startswith("the shards ran under different plans")
+    ]  # fmt: skip
+    fingerprint = load(split.root / "durations.json").fingerprint
+    assert f"1/3, 3/3 under plan {fingerprint}" in problem and "2/3 under plan count" in problem
