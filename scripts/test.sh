@@ -10,4 +10,12 @@ scripts/setup.sh
 scripts/py310_smoke.sh
 # The runner's own tests on Ubuntu 24.04's Python 3.12 and packages (.venv-py312).
 scripts/ubuntu_tier.sh
-exec .venv/bin/python -m pytest "$@"
+if (($#)); then
+  exec .venv/bin/python -m pytest "$@"
+fi
+# The whole suite in two passes: the tests that need no ROS 2 and build no workspace, two
+# sessions at once (pytest-xdist, a module to a session); then the ROS and colcon tests
+# one at a time, as a developer's machine runs them. Two sessions at once are two users of
+# one machine, which every test must bear (the busy machine, tests/conftest.py).
+.venv/bin/python -m pytest -n 2 --dist loadfile -m "not ros and not colcon"
+exec .venv/bin/python -m pytest -m "ros or colcon"
