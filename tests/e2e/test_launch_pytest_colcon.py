@@ -13,71 +13,31 @@ helpers/launch_env.py); one workspace, built once for both runs.
 from __future__ import annotations
 
 import json
-import subprocess
-from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
-from helpers import launch_pytest_files, launch_runs
+from helpers import launch_pytest_files
 from helpers.commands import run_cli
 from helpers.launch_pytest_files import ALWAYS_FAILS, TOKEN_TESTS
-from helpers.launch_runs import COLCON_HUNG, Run, launch_environment, raw_cases, run_launches
+from helpers.launch_runs import (
+    Workspace,
+    build_workspace,
+    raw_cases,
+)
 from helpers.pytest_sessions import OFF
-from helpers.workspace import crosstalk_workspace
 
 if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
-    from examples.crosstalk_workspace import Record, ResultSummary
+    pass
 
 #: The two packages tested at once, by their talker's token.
 PACKAGES = {"kappa": "launch_pytest_kappa", "sigma": "launch_pytest_sigma"}
 
 
-@dataclass(frozen=True)
-class Workspace:
-    root: Path
-    env: dict[str, str]
-    colcon: list[str]  # the launch environment's colcon with this workspace's folders
-
-    def test(self, *extra: str) -> tuple[Run, ResultSummary]:
-        """``colcon test`` of both packages at once, and colcon test-result's totals."""
-        junit = {token: self.root / "build" / name / "pytest.xml" for token, name in
-                 PACKAGES.items()}  # fmt: skip
-        argv = [*self.colcon, "test", *self.paths, "--parallel-workers", "2", *extra]
-        run = run_launches(self.root, self.env, argv, junit, self.root)
-        ws = crosstalk_workspace()
-        prefix = Path(self.colcon[0]).parents[1]
-        toolchain = ws.Toolchain(python=str(prefix / "bin" / "python"), prefix=str(prefix))
-        return run, ws.result_summary(self.root, toolchain)
-
-    @property
-    def paths(self) -> list[str]:
-        return ["--base-paths", str(self.root / "src"), "--build-base", str(self.root / "build"),
-                "--install-base", str(self.root / "install")]  # fmt: skip
-
-
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
     """Both packages, built once with the launch environment's colcon."""
-    python = launch_runs.launch_python()
     root = tmp_path_factory.mktemp("launch-pytest-colcon")
-    for token, name in PACKAGES.items():
-        launch_pytest_files.python_package(root / "src", name, token)
-    env = launch_environment(python, root, pool=2)
-    colcon = [str(python.parent / "colcon"), "--log-base", str(root / "log")]
-    built = Workspace(root, env, colcon)
-    build = subprocess.run(
-        [*colcon, "build", *built.paths], cwd=root, env=env, capture_output=True, text=True,
-        timeout=COLCON_HUNG, check=False,
-    )  # fmt: skip
-    assert build.returncode == 0, f"colcon build failed:\n{build.stdout}{build.stderr}"
-    return built
-
-
-def _talkers(run: Run) -> list[Record]:
-    missing = sorted(set(PACKAGES) - set(run.records))
-    assert not missing, f"no talker record from {missing}:\n{run.output}"
-    return [run.records[token] for token in PACKAGES]
+    return build_workspace(root, PACKAGES, launch_pytest_files.python_package)
 
 
 @pytest.mark.ros
@@ -99,7 +59,7 @@ def test_two_packages_at_once_report_every_test_on_distinct_ids(workspace: Works
     report = run_cli(["report", "--json", str(workspace.root / "build")], workspace.env)
     total = json.loads(report.stdout)["total"]
     assert (total["tests"], total["failures"], total["errors"]) == (10, 2, 0), report.stdout
-    talkers = _talkers(run)
+    talkers = workspace.talkers(run)
     assert all(record.passed for record in talkers), {r.token: r.foreign for r in talkers}
     first, second = talkers
     assert first.start < second.end and second.start < first.end, "the packages did not overlap"
@@ -111,7 +71,7 @@ def test_two_packages_at_once_report_every_test_on_distinct_ids(workspace: Works
 @pytest.mark.colcon
 def test_control_without_the_plugin_the_same_files_hear_crosstalk(workspace: Workspace) -> None:
     run, _summary = workspace.test("--pytest-args", *OFF)
-    talkers = _talkers(run)
+    talkers = workspace.talkers(run)
     assert all(record.domain_id is None for record in talkers), [r.domain_id for r in talkers]
     heard = [record.token for record in talkers if record.foreign]
     assert heard, f"no crosstalk on one shared domain: the control proves nothing\n{run.output}"

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +26,8 @@ from helpers.launch_files import ALWAYS_FAILS, TOKEN_CASES
 from helpers.launch_runs import (
     COLCON_HUNG,
     Run,
+    Workspace,
+    build_workspace,
     canonical,
     launch_environment,
     raw_cases,
@@ -34,10 +35,9 @@ from helpers.launch_runs import (
 )
 from helpers.pytest_sessions import OFF
 from helpers.results import CaseResult, load_result
-from helpers.workspace import crosstalk_workspace
 
 if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
-    from examples.crosstalk_workspace import Record, ResultSummary
+    from examples.crosstalk_workspace import ResultSummary
 
 
 @pytest.fixture(scope="module")
@@ -52,44 +52,11 @@ def launch_python() -> Path:
 PACKAGES = {"alpha": "launch_cases_alpha", "beta": "launch_cases_beta"}
 
 
-@dataclass(frozen=True)
-class Workspace:
-    root: Path
-    env: dict[str, str]
-    colcon: list[str]  # the launch environment's colcon with this workspace's folders
-
-    def test(self, *extra: str) -> tuple[Run, ResultSummary]:
-        """``colcon test`` of both packages at once, and colcon test-result's totals."""
-        junit = {token: self.root / "build" / name / "pytest.xml" for token, name in
-                 PACKAGES.items()}  # fmt: skip
-        argv = [*self.colcon, "test", *self.paths, "--parallel-workers", "2", *extra]
-        run = run_launches(self.root, self.env, argv, junit, self.root)
-        ws = crosstalk_workspace()
-        prefix = Path(self.colcon[0]).parents[1]
-        toolchain = ws.Toolchain(python=str(prefix / "bin" / "python"), prefix=str(prefix))
-        return run, ws.result_summary(self.root, toolchain)
-
-    @property
-    def paths(self) -> list[str]:
-        return ["--base-paths", str(self.root / "src"), "--build-base", str(self.root / "build"),
-                "--install-base", str(self.root / "install")]  # fmt: skip
-
-
 @pytest.fixture(scope="module")
-def python_workspace(launch_python: Path, tmp_path_factory: pytest.TempPathFactory) -> Workspace:
+def python_workspace(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
     """Both ament_python packages, built once with the launch environment's colcon."""
     root = tmp_path_factory.mktemp("launch-cases-python")
-    for token, name in PACKAGES.items():
-        launch_files.python_package(root / "src", name, token)
-    env = launch_environment(launch_python, root, pool=2)
-    colcon = [str(launch_python.parent / "colcon"), "--log-base", str(root / "log")]
-    workspace = Workspace(root, env, colcon)
-    build = subprocess.run(
-        [*colcon, "build", *workspace.paths], cwd=root, env=env, capture_output=True,
-        text=True, timeout=COLCON_HUNG, check=False,
-    )  # fmt: skip
-    assert build.returncode == 0, f"colcon build failed:\n{build.stdout}{build.stderr}"
-    return workspace
+    return build_workspace(root, PACKAGES, launch_files.python_package)
 
 
 @pytest.fixture(scope="module")
@@ -100,12 +67,6 @@ def isolated_run(python_workspace: Workspace) -> tuple[Run, ResultSummary]:
 @pytest.fixture(scope="module")
 def plain_run(python_workspace: Workspace) -> tuple[Run, ResultSummary]:
     return python_workspace.test("--pytest-args", *OFF)
-
-
-def _talkers(run: Run) -> list[Record]:
-    missing = sorted(set(PACKAGES) - set(run.records))
-    assert not missing, f"no talker record from {missing}:\n{run.output}"
-    return [run.records[token] for token in PACKAGES]
 
 
 @pytest.mark.ros
@@ -137,7 +98,7 @@ def test_two_packages_at_once_report_each_case_on_distinct_ids(
     report = run_cli(["report", "--json", str(build)], python_workspace.env)
     total = json.loads(report.stdout)["total"]
     assert (total["tests"], total["failures"], total["errors"]) == (8, 2, 0), report.stdout
-    talkers = _talkers(run)
+    talkers = python_workspace.talkers(run)
     assert all(record.passed for record in talkers), {r.token: r.foreign for r in talkers}
     ids = {record.token: record.domain_id for record in talkers}
     assert None not in ids.values() and len(set(ids.values())) == 2, f"IDs shared: {ids}"
@@ -148,11 +109,11 @@ def test_two_packages_at_once_report_each_case_on_distinct_ids(
 @pytest.mark.ros
 @pytest.mark.colcon
 def test_without_the_plugin_the_same_files_hear_crosstalk(
-    plain_run: tuple[Run, ResultSummary],
+    plain_run: tuple[Run, ResultSummary], python_workspace: Workspace
 ) -> None:
     """The control: one domain for both, crosstalk, and one test per file as before."""
     run, summary = plain_run
-    talkers = _talkers(run)
+    talkers = python_workspace.talkers(run)
     assert all(record.domain_id is None for record in talkers), [r.domain_id for r in talkers]
     heard = [record.token for record in talkers if record.foreign]
     assert heard, f"no crosstalk on one shared domain: the control proves nothing\n{run.output}"

@@ -59,24 +59,9 @@ _RUNNING = re.compile(r"^Running with ROS_DOMAIN_ID (\d+)\b", re.MULTILINE)
 
 
 def _package(root: Path, name: str, token: str) -> None:
-    package = root / name
-    (package / "test").mkdir(parents=True)
-    depends = "".join(
-        f"  <{kind}>{dep}</{kind}>\n"
-        for kind, dep in (
-            ("buildtool_depend", "ament_cmake"),
-            ("test_depend", "ament_cmake_ros"),
-            ("test_depend", "launch_testing_ament_cmake"),
-            ("test_depend", "rclpy"),
-        )
-    )
-    (package / "package.xml").write_text(
-        launch_files.PACKAGE_XML.format(name=name, depends=depends, build_type="ament_cmake")
-    )
-    (package / "CMakeLists.txt").write_text(
-        CMAKE_LISTS.format(name=name, target=TARGET, token=token)
-    )
-    (package / "test" / "test_tokens_launch.py").write_text(launch_files.token_launch(token))
+    lists = CMAKE_LISTS.format(name=name, target=TARGET, token=token)
+    depends = ("ament_cmake_ros", "launch_testing_ament_cmake", "rclpy")
+    launch_files.cmake_package(root, name, lists, token, depends)
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,36 @@ TOKEN_CASES = (
 )
 ALWAYS_FAILS = TOKEN_CASES[0]
 
+#: The function every launch and test file defines: one line in $LAUNCH_CASES_LOG a call.
+NOTE = '''
+
+def note(*words):
+    """One line in $LAUNCH_CASES_LOG: what ran, in which pytest process, on which ID."""
+    log = os.environ.get("LAUNCH_CASES_LOG")
+    if log:
+        line = " ".join(map(str, (*words, os.getpid(), os.environ.get("ROS_DOMAIN_ID", "-"))))
+        with open(log, "a") as out:
+            out.write(line + "\\n")
+'''
+
+#: The imports of a file that listens for the crosstalk demo's talker (``talker`` to format).
+LISTENER = """\
+from collections import Counter
+from pathlib import Path
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from std_msgs.msg import String
+
+TALKER = Path({talker!r})
+sys.path.insert(0, str(TALKER.parent))
+import token_talker  # noqa: E402
+"""
+
 #: Lines every launch file starts with: the log every launch and case writes to.
-_PREAMBLE = '''\
+_PREAMBLE = (
+    """\
 import os
 import sys
 import time
@@ -40,32 +68,15 @@ import launch_testing.actions
 import launch_testing.asserts
 import launch_testing.util
 import pytest
-
-
-def note(*words):
-    """One line in $LAUNCH_CASES_LOG: what ran, in which pytest process, on which ID."""
-    log = os.environ.get("LAUNCH_CASES_LOG")
-    if log:
-        line = " ".join(map(str, (*words, os.getpid(), os.environ.get("ROS_DOMAIN_ID", "-"))))
-        with open(log, "a") as out:
-            out.write(line + "\\n")
-'''
+"""
+    + NOTE
+)
 
 TOKEN_LAUNCH = (
     _PREAMBLE
+    + "\n"
+    + LISTENER
     + """
-from collections import Counter
-from pathlib import Path
-
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from std_msgs.msg import String
-
-TALKER = Path({talker!r})
-sys.path.insert(0, str(TALKER.parent))
-import token_talker  # noqa: E402
-
 TOKEN = os.environ.get("LAUNCH_CASES_TOKEN") or {token!r}
 
 
@@ -390,24 +401,32 @@ ament_package()
 CMAKE_TESTS = {"by_macro": "macro", "by_all": "all", "by_launch": "launch"}
 
 
-def cmake_package(root: Path, name: str) -> Path:
-    """An ament_cmake package registering the token launch file as CMAKE_LISTS says."""
+def cmake_package(
+    root: Path,
+    name: str,
+    cmake_lists: str | None = None,
+    token: str = "unset",
+    test_depends: tuple[str, ...] = ("ament_cmake_pytest", "launch_testing_ament_cmake", "rclpy"),
+) -> Path:
+    """An ament_cmake package registering the token launch file (test/test_tokens_launch.py).
+
+    As ``cmake_lists`` says (CMAKE_LISTS when None), its talker's token ``token``.
+    """
     package = root / name
     (package / "test").mkdir(parents=True)
     depends = "".join(
         f"  <{kind}>{dep}</{kind}>\n"
         for kind, dep in (
             ("buildtool_depend", "ament_cmake"),
-            ("test_depend", "ament_cmake_pytest"),
-            ("test_depend", "launch_testing_ament_cmake"),
-            ("test_depend", "rclpy"),
+            *(("test_depend", dep) for dep in test_depends),
         )
     )
     (package / "package.xml").write_text(
         PACKAGE_XML.format(name=name, depends=depends, build_type="ament_cmake")
     )
-    (package / "CMakeLists.txt").write_text(CMAKE_LISTS.format(name=name))
-    (package / "test" / "test_tokens_launch.py").write_text(token_launch("unset"))
+    lists = CMAKE_LISTS.format(name=name) if cmake_lists is None else cmake_lists
+    (package / "CMakeLists.txt").write_text(lists)
+    (package / "test" / "test_tokens_launch.py").write_text(token_launch(token))
     return package
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from helpers.launch_files import PACKAGE_XML, SETUP_PY, TALKER
+from helpers.launch_files import LISTENER, NOTE, PACKAGE_XML, SETUP_PY, TALKER
 
 #: The tests of a token file as pytest names them, the failing one first.
 TOKEN_TESTS = (
@@ -28,7 +28,8 @@ TOKEN_TESTS = (
 ALWAYS_FAILS = TOKEN_TESTS[0]
 
 #: Lines every file starts with: the log every launch and test writes to.
-_PREAMBLE = '''\
+_PREAMBLE = (
+    """\
 import os
 import sys
 import time
@@ -39,32 +40,15 @@ import launch.event_handlers
 import launch.substitutions
 import launch_pytest
 import pytest
-
-
-def note(*words):
-    """One line in $LAUNCH_CASES_LOG: what ran, in which pytest process, on which ID."""
-    log = os.environ.get("LAUNCH_CASES_LOG")
-    if log:
-        line = " ".join(map(str, (*words, os.getpid(), os.environ.get("ROS_DOMAIN_ID", "-"))))
-        with open(log, "a") as out:
-            out.write(line + "\\n")
-'''
+"""
+    + NOTE
+)
 
 TOKEN_FILE = (
     _PREAMBLE
+    + "\n"
+    + LISTENER
     + """
-from collections import Counter
-from pathlib import Path
-
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from std_msgs.msg import String
-
-TALKER = Path({talker!r})
-sys.path.insert(0, str(TALKER.parent))
-import token_talker  # noqa: E402
-
 TOKEN = {token!r}
 
 

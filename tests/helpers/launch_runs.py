@@ -11,7 +11,7 @@ and pytest's own result files.
 from __future__ import annotations
 
 import subprocess
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -25,7 +25,7 @@ from helpers.results import CaseResult, load_result
 from helpers.workspace import crosstalk_workspace
 
 if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
-    from examples.crosstalk_workspace import Record
+    from examples.crosstalk_workspace import Record, ResultSummary
 
 #: Only stops a hung colcon; no verdict depends on it.
 COLCON_HUNG = HUNG * 4
@@ -123,3 +123,54 @@ def canonical(
     output = into / f"{package}.xml"  # not beside the source: colcon test-result reads those
     normalise(source, output, env, package)
     return load_result(output).cases
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """ament_python packages of launch files, tested at once by the launch environment's colcon."""
+
+    root: Path
+    env: dict[str, str]
+    colcon: list[str]  # the launch environment's colcon with this workspace's folders
+    packages: Mapping[str, str]  # each package's name, by its talker's token
+
+    def test(self, *extra: str) -> tuple[Run, ResultSummary]:
+        """``colcon test`` of every package at once, and colcon test-result's totals."""
+        junit = {token: self.root / "build" / name / "pytest.xml"
+                 for token, name in self.packages.items()}  # fmt: skip
+        workers = str(len(self.packages))
+        argv = [*self.colcon, "test", *self.paths, "--parallel-workers", workers, *extra]
+        run = run_launches(self.root, self.env, argv, junit, self.root)
+        ws = crosstalk_workspace()
+        prefix = Path(self.colcon[0]).parents[1]
+        toolchain = ws.Toolchain(python=str(prefix / "bin" / "python"), prefix=str(prefix))
+        return run, ws.result_summary(self.root, toolchain)
+
+    @property
+    def paths(self) -> list[str]:
+        return ["--base-paths", str(self.root / "src"), "--build-base", str(self.root / "build"),
+                "--install-base", str(self.root / "install")]  # fmt: skip
+
+    def talkers(self, run: Run) -> list[Record]:
+        """Each package's talker record, in the order of :attr:`packages`; all must be there."""
+        missing = sorted(set(self.packages) - set(run.records))
+        assert not missing, f"no talker record from {missing}:\n{run.output}"
+        return [run.records[token] for token in self.packages]
+
+
+def build_workspace(
+    root: Path, packages: Mapping[str, str], write: Callable[[Path, str, str], object]
+) -> Workspace:
+    """``packages`` written by ``write(src, name, token)`` and built once by colcon."""
+    python = launch_python()
+    for token, name in packages.items():
+        write(root / "src", name, token)
+    env = launch_environment(python, root, pool=len(packages))
+    colcon = [str(python.parent / "colcon"), "--log-base", str(root / "log")]
+    workspace = Workspace(root, env, colcon, packages)
+    build = subprocess.run(
+        [*colcon, "build", *workspace.paths], cwd=root, env=env, capture_output=True,
+        text=True, timeout=COLCON_HUNG, check=False,
+    )  # fmt: skip
+    assert build.returncode == 0, f"colcon build failed:\n{build.stdout}{build.stderr}"
+    return workspace

@@ -143,6 +143,17 @@ print("hooked" if done else "never hooked")
 """
 
 
+def _write_while(script: str, path: Path, what: str) -> tuple[str, str]:
+    """Run ``script`` (a write with an audit hook that makes ``what`` appear): its two lines."""
+    proc = subprocess.run(
+        [sys.executable, "-c", script, str(path), what],
+        capture_output=True, text=True, timeout=HUNG, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    said, second = proc.stdout.splitlines()
+    return said, second
+
+
 @pytest.mark.parametrize("what", ["fifo", "file"])
 def test_a_fifo_that_appears_during_the_write_is_not_replaced_either(
     tmp_path: Path, what: str
@@ -152,12 +163,7 @@ def test_a_fifo_that_appears_during_the_write_is_not_replaced_either(
     The control: a regular file that appears at the same instant is replaced.
     """
     path = tmp_path / "r.xml"
-    proc = subprocess.run(
-        [sys.executable, "-c", APPEARS_MEANWHILE, str(path), what],
-        capture_output=True, text=True, timeout=HUNG, check=False,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    said, hooked = proc.stdout.splitlines()
+    said, hooked = _write_while(APPEARS_MEANWHILE, path, what)
     assert hooked == "hooked", "the FIFO must appear after the first check"
     if what == "fifo":
         assert said.startswith("refused: ") and "it is a FIFO" in said, said
@@ -207,12 +213,7 @@ def test_a_fifo_that_appears_as_the_rename_is_called_is_not_replaced_either(
     The control: a regular file that appears at the same instant is replaced.
     """
     path = tmp_path / "r.xml"
-    proc = subprocess.run(
-        [sys.executable, "-c", APPEARS_AT_THE_RENAME, str(path), what],
-        capture_output=True, text=True, timeout=HUNG, check=False,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    said, made = proc.stdout.splitlines()
+    said, made = _write_while(APPEARS_AT_THE_RENAME, path, what)
     assert made != "never hooked", "nothing appeared at the rename"
     if what == "fifo":
         assert said.startswith("refused: ") and "it is a FIFO" in said, said
