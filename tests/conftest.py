@@ -11,7 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from helpers import busy_machine, capabilities
+from helpers import busy_machine, capabilities, domains
 from helpers.commands import BIN, CLI, HUNG, POLICY_VARS
 from helpers.distros import JAZZY, KILTED, Distro, Tools
 from helpers.domains import free_ids
@@ -93,6 +93,13 @@ def _busy_machine(
         yield
     finally:
         scene.stop()
+
+
+@pytest.fixture(autouse=True)
+def _id_claims() -> Iterator[None]:
+    """The IDs a test picked (helpers/domains.py) stay its own until it ends, then free."""
+    yield
+    domains.release_claims()
 
 
 @pytest.fixture

@@ -4,12 +4,22 @@ Ports 32768+ID and the processes' environments are machine-wide, and other runne
 IDs in the default lock directory, so a test never assumes an ID is free: it takes IDs
 whose lock, port, environment and DDS ports are all unused now, from 215-232 where it can (outside
 the default pool and upstream's 1-100, where other runs on this machine rarely are).
+
+Other sessions of this suite on the machine (xdist's workers, a second checkout's run)
+pick from the same IDs, and an ID free when checked may be theirs a moment later, before
+either test reserved it: each ID picked is claimed too, by a ``flock`` on a file of its
+own in a directory all sessions share, until the test that picked it ends
+(:func:`release_claims`, from tests/conftest.py). A claimed ID is never picked again.
 """
 
 from __future__ import annotations
 
+import fcntl
+import os
 import random
+import tempfile
 from collections.abc import Sequence
+from pathlib import Path
 
 import pytest
 
@@ -20,6 +30,34 @@ from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
 from ros_isolated_test.domain_coordinator.port_guard import port_is_taken
 
 HIGH_IDS = range(215, HIGHEST_VALID_ID + 1)
+#: Where the sessions of this suite on this machine claim the IDs their tests picked.
+CLAIMS = Path(tempfile.gettempdir()) / "ros-isolated-test-suite-claims"
+
+#: The claims this process holds (ID -> descriptor of its locked file), for the running test.
+_claimed: dict[int, int] = {}
+
+
+def _claim(domain_id: int) -> bool:
+    """Claim ``domain_id`` for the running test; False when this or another session has it."""
+    if domain_id in _claimed:
+        return False
+    if not CLAIMS.is_dir():
+        CLAIMS.mkdir(exist_ok=True)
+        os.chmod(CLAIMS, 0o1777)  # every user's sessions claim here (the mode beats umask)
+    fd = os.open(CLAIMS / str(domain_id), os.O_RDONLY | os.O_CREAT | os.O_CLOEXEC, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return False
+    _claimed[domain_id] = fd
+    return True
+
+
+def release_claims() -> None:
+    """Let other sessions pick the IDs the test that just ended picked."""
+    while _claimed:
+        os.close(_claimed.popitem()[1])
 
 
 def in_use(domain_id: int, squatted: set[int]) -> bool:
@@ -50,7 +88,7 @@ def free_ids(count: int, candidates: Sequence[int] = HIGH_IDS) -> list[int]:
     squatted = set(squatters.scan(set(everything))) | set(participants.bound_domains())
     free: list[int] = []
     for domain_id in everything:
-        if not in_use(domain_id, squatted):
+        if not in_use(domain_id, squatted) and _claim(domain_id):
             free.append(domain_id)
             if len(free) == count:
                 return free
