@@ -13,9 +13,8 @@ scripts/ubuntu_tier.sh
 if (($#)); then
   exec .venv/bin/python -m pytest "$@"
 fi
-# The whole suite in two passes: the tests that need no ROS 2 and build no workspace, two
-# sessions at once (pytest-xdist, a module to a session); then the ROS and colcon tests
-# one at a time, as a developer's machine runs them. Two sessions at once are two users of
-# one machine, which every test must bear (the busy machine, tests/conftest.py).
-.venv/bin/python -m pytest -n 2 --dist loadfile -m "not ros and not colcon"
-exec .venv/bin/python -m pytest -m "ros or colcon"
+# The whole suite, two sessions at once (pytest-xdist): one runs the ros and colcon tests one
+# at a time, as a developer's machine does; the other every other module whole (the groups:
+# tests/conftest.py). Two sessions at once are two users of one machine, which every test
+# must bear (the busy machine, tests/conftest.py).
+exec .venv/bin/python -m pytest -n 2 --dist loadgroup

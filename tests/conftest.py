@@ -45,6 +45,24 @@ def pytest_configure(config: pytest.Config) -> None:
         config.option.ros_isolation = False
 
 
+#: The xdist group of the ros and colcon tests: one session runs them, one at a time.
+ONE_AT_A_TIME = "ros-and-colcon"
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Under ``--dist loadgroup`` (scripts/test.sh): every ros and colcon test in one group.
+
+    They run one at a time in one session, as on a developer's machine, while the other
+    session runs every other module whole (as ``--dist loadfile`` would): two sessions are
+    two users of one machine, which every test must bear. Without loadgroup, no effect.
+    """
+    for item in items:
+        heavy = item.get_closest_marker("ros") or item.get_closest_marker("colcon")
+        group = ONE_AT_A_TIME if heavy else item.nodeid.split("::", 1)[0]
+        item.add_marker(pytest.mark.xdist_group(group))
+
+
 def _strict(config: pytest.Config) -> bool:
     return bool(config.getoption("--no-skips")) or os.environ.get(NO_SKIPS_ENV) == "1"
 

@@ -33,6 +33,7 @@ from helpers.workspace import crosstalk_workspace
 
 from ros_isolated_test.domain_coordinator.pool import parse_pool
 from ros_isolated_test.domain_coordinator.status import DomainUse, domain_uses
+from ros_isolated_test.process import proc
 
 if TYPE_CHECKING:  # annotations only; at run time the module is loaded by path
     from examples.crosstalk_workspace import Record
@@ -72,7 +73,8 @@ class Run:
     allocated: dict[str, int]
     output: str
     #: What ``status`` saw while the tests ran (each ID in use, read in this process), the
-    #: first time it saw a runner that replaced colcon's ID beside colcon's own.
+    #: first time it saw a runner that replaced colcon's ID beside colcon's own; the rows
+    #: of any other colcon on the machine left out.
     seen: list[DomainUse]
     #: ``status``'s table, printed by the CLI at the moment it saw a replaced ID.
     table: str
@@ -151,6 +153,23 @@ def workspace(tmp_path_factory: pytest.TempPathFactory, pool_env: dict[str, str]
     return ws
 
 
+def _tree(root: int) -> set[int]:
+    """``root`` and every process below it, now."""
+    parents: dict[int, int] = {}
+    for pid in proc.pids():
+        stat = proc.read_stat(pid)
+        if stat is not None:
+            parents[stat.pid] = stat.ppid
+    tree = {root}
+    for member in parents:
+        chain = [member]
+        while chain[-1] in parents and chain[-1] not in tree and len(chain) < 64:
+            chain.append(parents[chain[-1]])
+        if chain[-1] in tree:
+            tree.update(chain)
+    return tree
+
+
 def _watch(
     ws: Workspace, pool_env: Mapping[str, str], process: subprocess.Popen[str]
 ) -> tuple[list[DomainUse], str]:
@@ -162,7 +181,13 @@ def _watch(
     lock_dir = Path(pool_env["ROS_ISOLATED_TEST_LOCK_DIR"])
     everything = parse_pool("1-232")
     while process.poll() is None:
-        uses = domain_uses(lock_dir, everything)
+        ours = _tree(process.pid)
+        uses = [
+            use
+            for use in domain_uses(lock_dir, everything)
+            # Another colcon on the machine (another session's) is not this run's.
+            if use.via != "colcon" or (use.holder is not None and use.holder.pid in ours)
+        ]
         if any(use.replaced for use in uses) and any(use.via == "colcon" for use in uses):
             table = run_cli(["status"], {**pool_env, "ROS_ISOLATED_TEST_DOMAINS": "1-232"})
             return uses, table.stdout

@@ -200,7 +200,8 @@ def test_an_output_fifo_nobody_reads_is_a_one_line_error_and_nothing_runs(
 
 #: Opens the FIFO ($1) for reading, which returns once the runner ($4 holds its PID) opens
 #: it; stops the runner there, so whether the result file ($2) existed by then is certain;
-#: writes that to $3, then everything read.
+#: writes that to $3, then everything read. The test writes more than a pipe holds, so the
+#: runner cannot end before the reader reads, however late the reader is scheduled.
 FIFO_READER = """
 import os, signal, sys, time
 fifo_path, result, out_path, pid_path = sys.argv[1:5]
@@ -209,13 +210,18 @@ with open(fifo_path, "rb") as fifo:
         time.sleep(0.001)
     pid = int(open(pid_path).read())
     os.kill(pid, signal.SIGSTOP)
-    while open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] != "T":
+    state = ""
+    while state not in ("T", "Z"):
         time.sleep(0.001)
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
     before = os.path.exists(result)
     os.kill(pid, signal.SIGCONT)
     data = fifo.read()
 with open(out_path, "wb") as out:
-    out.write(b"placeholder first\\n" if before else b"opened first\\n")
+    if state == "Z":
+        out.write(b"the runner ended before it was stopped\\n")
+    else:
+        out.write(b"placeholder first\\n" if before else b"opened first\\n")
     out.write(data)
 """
 
@@ -232,7 +238,8 @@ def test_an_output_fifo_with_a_reader_is_opened_after_the_placeholder_and_gets_t
     reader_argv = [sys.executable, "-c", FIFO_READER, str(fifo), str(result), str(got)]
     reader = subprocess.Popen([*reader_argv, str(pid_file)])
     argv = [sys.executable, "-u", runner_script, str(result), "--output-file", str(fifo)]
-    argv += ["--generate-result-on-success", "--command", "echo", "through-the-fifo"]
+    talk = "import sys; sys.stdout.write('through-the-fifo\\n' + 'x' * 300_000 + '\\n')"
+    argv += ["--generate-result-on-success", "--command", sys.executable, "-c", talk]
     try:
         with subprocess.Popen(
             argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE
