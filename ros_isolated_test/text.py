@@ -84,12 +84,17 @@ def display_text(text: str, limit: int = DISPLAY_LIMIT) -> str:
     return "".join(char if char.isprintable() else shown_code(ord(char)) for char in shown(text))
 
 
-def json_string(text: str) -> str:
+def json_string(text: str, ascii_only: bool = False) -> str:
     r"""``text`` as a JSON string literal; lone surrogates (undecodable bytes) as ``\uXXXX``.
 
-    For the records runners write on a test's path, where ``json`` is not imported.
+    For the records runners write on a test's path, where ``json`` is not imported. With
+    ``ascii_only`` every other non-ASCII character is escaped too (as ``json.dumps`` does).
     """
     escaped = text.translate(_JSON_ESCAPES)
+    if ascii_only:
+        if not escaped.isascii():
+            escaped = "".join(_json_ascii(char) for char in escaped)
+        return f'"{escaped}"'
     try:
         escaped.encode("utf-8")
     except UnicodeEncodeError:
@@ -97,6 +102,17 @@ def json_string(text: str) -> str:
             f"\\u{ord(char):04x}" if 0xD800 <= ord(char) <= 0xDFFF else char for char in escaped
         )
     return f'"{escaped}"'
+
+
+def _json_ascii(char: str) -> str:
+    r"""``char`` as ASCII JSON: itself, ``\uXXXX``, or a surrogate pair past U+FFFF."""
+    code = ord(char)
+    if code < 0x80:
+        return char
+    if code <= 0xFFFF:
+        return f"\\u{code:04x}"
+    code -= 0x10000
+    return f"\\u{0xD800 + (code >> 10):04x}\\u{0xDC00 + (code & 0x3FF):04x}"
 
 
 def cut_mark(cut: int, mark: str = CUT_MARK) -> str:

@@ -20,6 +20,7 @@ import os
 
 from ros_isolated_test import atomic_file
 from ros_isolated_test.shard.spec import Share
+from ros_isolated_test.text import json_string
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -62,32 +63,16 @@ def is_record(name: str) -> bool:
     return bool(of) and index.isascii() and index.isdigit() and total.isascii() and total.isdigit()
 
 
-def _json_string(value: str) -> str:
-    """``value`` as a JSON string of ASCII only (``json.dumps`` without loading ``json``)."""
-    parts = ['"']
-    for char in value:
-        code = ord(char)
-        if 0x20 <= code < 0x7F and char not in '"\\':
-            parts.append(char)
-        elif code > 0xFFFF:  # a surrogate pair, as JSON spells it
-            code -= 0x10000
-            parts.append(f"\\u{0xD800 + (code >> 10):04x}\\u{0xDC00 + (code & 0x3FF):04x}")
-        else:
-            parts.append(f"\\u{code:04x}")
-    parts.append('"')
-    return "".join(parts)
-
-
 def content(selection: Selection, host: str, version: str) -> bytes:
     """The record's bytes: the same from every runner of one machine."""
     share = selection.share
     fields = (
-        ("shard", _json_string(str(share))),
+        ("shard", json_string(str(share), True)),
         ("index", str(share.index)),
         ("total", str(share.total)),
-        ("plan", _json_string(selection.plan_name)),
-        ("host", _json_string(host)),
-        ("version", _json_string(version)),
+        ("plan", json_string(selection.plan_name, True)),
+        ("host", json_string(host, True)),
+        ("version", json_string(version, True)),
     )
     body = ",\n".join(f'  "{name}": {value}' for name, value in fields)
     return f"{{\n{body}\n}}\n".encode("ascii")

@@ -100,13 +100,18 @@ def test_bounded_text_streamed_in_pieces_keeps_what_bounded_keeps(size: int) -> 
         "caf\u00e9 \u2713",
         os.fsdecode(b"caf\xe9"),  # an undecodable byte: a lone surrogate
         "\ud800 alone",
+        "past U+FFFF: \U0001f600",
     ],
 )
-def test_json_string_is_a_json_literal_that_reads_back_as_the_text(text: str) -> None:
+@pytest.mark.parametrize("ascii_only", [False, True])
+def test_json_string_is_a_json_literal_that_reads_back_as_the_text(
+    text: str, ascii_only: bool
+) -> None:
     """What a runner writes without ``json`` is read back by ``json`` as the very text."""
-    literal = json_string(text)
+    literal = json_string(text, ascii_only)
     assert json.loads(literal) == text
     literal.encode()  # never refused: no surrogate is left raw
+    assert literal.isascii() or not ascii_only, literal
 
 
 def test_json_string_keeps_printable_characters_as_they_are() -> None:
