@@ -154,10 +154,11 @@ def _holding(
         state.stack.callback(_set_environ, dict(os.environ))
         _set_environ(policy.for_domain(held.domain_id))
         lines, properties = summary.summary(policy, held.domain_id, config_settings, held.reserved)
+        first = f"ROS_DOMAIN_ID {held.domain_id}{summary.replacing(policy)}"  # as the runner's
         if policy.discovery is not None:  # its first line: the range, said beside the ID
-            lines[0] = f"ROS_DOMAIN_ID {held.domain_id}, {lines[0]}"
+            lines[0] = f"{first}, {lines[0]}"
         else:
-            lines.insert(0, f"ROS_DOMAIN_ID {held.domain_id}")
+            lines.insert(0, first)
     if held.resources:  # said right after the ID, as the runner says it
         line, more = summary.resources_summary(held, config_settings)
         lines.insert(1, line)

@@ -21,6 +21,8 @@ RESOURCES_OPTION = "--ros-isolated-test-resources"
 SHARD_OPTION = "--ros-isolated-test-shard"
 #: Options that run no test (as --help): nothing is reserved for them.
 _NO_TEST_OPTIONS = ("help", "markers", "showfixtures", "show_fixtures_per_test", "collectonly")
+#: The session's package.xml, found once (:func:`manifest`).
+_MANIFEST: pytest.StashKey[Path | None] = pytest.StashKey()
 
 
 def add(parser: pytest.Parser) -> None:
@@ -117,6 +119,18 @@ def resources(config: pytest.Config) -> tuple[str, str]:
 
 def _in_ros_package(config: pytest.Config) -> bool:
     """A package.xml at or above the rootdir or a path on the command line: colcon's case."""
+    return manifest(config) is not None
+
+
+def manifest(config: pytest.Config) -> Path | None:
+    """The session's ``package.xml``: at or above the rootdir, else above a test path.
+
+    Walked once per session (kept in the config's stash): it both switches the plugin on
+    and names the package of the session's items (``sharding.package_name``).
+    """
+    if _MANIFEST in config.stash:
+        return config.stash[_MANIFEST]
+    found = None
     starts = [config.rootpath, *(Path(arg.split("::")[0]) for arg in config.args)]
     seen: set[Path] = set()
     for start in starts:
@@ -126,5 +140,9 @@ def _in_ros_package(config: pytest.Config) -> bool:
                 break
             seen.add(candidate)
             if (candidate / "package.xml").is_file():
-                return True
-    return False
+                found = candidate / "package.xml"
+                break
+        if found is not None:
+            break
+    config.stash[_MANIFEST] = found
+    return found

@@ -112,8 +112,13 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             xml.add_global_property(name, value)
 
 
+@pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Each item named by its identity; the other shares' items deselected (sharding.py)."""
+    """Each item named by its identity; the other shares' items deselected (sharding.py).
+
+    Last: the split places what pytest's own selection (``-k``, ``-m``) kept, so a share
+    it empties is told apart from a session that selected nothing.
+    """
     split = config.stash.get(_SHARDING, None)
     if split is not None:
         from ros_isolated_test.pytest_plugin import sharding
@@ -154,6 +159,11 @@ def pytest_testnodedown(node: object, error: object) -> None:
     output = getattr(node, "workeroutput", None)
     if config is None or not output:
         return
+    split = config.stash.get(_SHARDING, None)
+    if split is not None:  # what the worker's split deselected: the controller's exit code
+        from ros_isolated_test.pytest_plugin import sharding
+
+        sharding.worker_done(split, output)
     state = config.stash.get(_STATE, None)
     if state is None:
         return
@@ -202,14 +212,16 @@ def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]
     """
     config = session.config
     split = config.stash.get(_SHARDING, None)
-    if split is not None:  # a session whose share held none of its tests passed: not 5
+    if split is not None:  # a session whose share the split emptied passed: not 5
         from ros_isolated_test.pytest_plugin import sharding
 
-        session.exitstatus = sharding.exit_status(split, config, session.exitstatus)
+        session.exitstatus = sharding.exit_status(split, session.exitstatus)
     state = config.stash.get(_STATE, None)
     if state is not None and state.interrupts.interrupted:
         state.interrupts.wait_for_workers()
     yield
+    if split is not None:  # --junit-xml is written now (junitxml's sessionfinish)
+        sharding.complete_record(split, config)
     if state is None:
         return
     from ros_isolated_test.pytest_plugin import holding

@@ -6,13 +6,19 @@ for them: the plugin splits such a package test by test. With ``ROS_ISOLATED_TES
 identity, ``<package>/<node id>`` (the package from the ``package.xml`` at or above the
 rootdir, the name colcon knows it by), under the same plan every machine computes
 (``shard.selection``); the others are deselected, so they are not in ``--junit-xml``
-at all, and a session whose share is empty exits 0, not 5 ("no tests collected").
+at all, and a session whose share is empty because of the split exits 0, not 5 ("no
+tests collected"): the split places the items that pytest's own selection (``-k``,
+``-m``, ...) kept, so a session that selected nothing, or a package of no tests, still
+exits 5 (an xdist controller learns from its workers what the split deselected).
 
 Every item the plugin names carries its identity as the testcase property
 ``ros_isolated_test_identity`` (whether split or not), so ``report --durations`` can
 measure it. ``--junit-xml`` gets the suite properties ``shard`` and ``shard_plan`` and,
 beside it, the machine's record (``shard.record``): a merge then knows this share
-reported even when it ran nothing.
+reported even when it ran nothing. The record says ``started`` from the session's start
+(an older ``--junit-xml`` file there is removed then) until pytest has written the
+file: a session killed in between leaves a started record and no results, which the
+merge names as a failure of the share.
 
 Under a RUNNER of ours (ament_add_pytest_test through the CMake include) the runner has
 decided for the whole test: its ``ROS_ISOLATED_TEST_SHARD`` is not passed on, and an
@@ -39,6 +45,8 @@ if TYPE_CHECKING:
 
 #: pytest's exit code when no test was collected; a session whose share is empty is not that.
 _NO_TESTS = 5
+#: What an xdist worker tells its controller: how many items the split deselected.
+DESELECTED_KEY = "ros_isolated_test_split_deselected"
 
 
 class Sharding:
@@ -102,17 +110,16 @@ def decide(config: pytest.Config, active: bool) -> Sharding | None:
 
 
 def package_name(config: pytest.Config) -> str:
-    """The ROS package of the session: the ``package.xml`` at or above the rootdir names it.
+    """The ROS package of the session: its ``package.xml`` names it (``options.manifest``).
 
     Else colcon's ``--junit-prefix`` (the package name), else the rootdir's name.
     """
-    for folder in (config.rootpath, *config.rootpath.parents):
-        manifest = folder / "package.xml"
-        if manifest.is_file():
-            found = _manifest_name(manifest)
-            if found:
-                return found
-            break
+    from ros_isolated_test.pytest_plugin.options import manifest
+
+    found = manifest(config)
+    name = _manifest_name(found) if found is not None else ""
+    if name:
+        return name
     prefix = getattr(config.option, "junitprefix", None)
     if prefix and "/" not in prefix:
         return str(prefix)
@@ -148,32 +155,87 @@ def select_items(sharding: Sharding, config: pytest.Config, items: list[pytest.I
         sharding.deselected += len(others)
         config.hook.pytest_deselected(items=others)
         items[:] = kept
+    output = getattr(config, "workeroutput", None)
+    if output is not None:  # an xdist worker: its controller collects nothing itself
+        output[DESELECTED_KEY] = sharding.deselected
+
+
+def worker_done(sharding: Sharding, output: dict[str, object]) -> None:
+    """The xdist controller: what a worker's split deselected (each worker collects all)."""
+    found = output.get(DESELECTED_KEY)
+    if isinstance(found, int):
+        sharding.deselected = max(sharding.deselected, found)
+
+
+def _junit_file(sharding: Sharding, config: pytest.Config) -> Path | None:
+    """The ``--junit-xml`` file beside which the record goes; None: no record here.
+
+    None without a split or the option, and in an xdist worker (which writes no file).
+    """
+    xmlpath = getattr(config.option, "xmlpath", None)
+    if sharding.selection is None or not xmlpath or hasattr(config, "workerinput"):
+        return None
+    return Path(os.path.abspath(os.path.expanduser(xmlpath)))
 
 
 def leave_record(sharding: Sharding, config: pytest.Config) -> None:
-    """Leave the machine's record beside ``--junit-xml`` (an xdist worker writes no file)."""
-    selection = sharding.selection
-    xmlpath = getattr(config.option, "xmlpath", None)
-    if selection is None or not xmlpath or hasattr(config, "workerinput"):
+    """Leave the machine's record, started, beside ``--junit-xml``; an older file there goes.
+
+    Until :func:`complete_record`, the record says the session started: killed before
+    pytest writes its file, it leaves no results, and no older file to be taken for them.
+    """
+    junit = _junit_file(sharding, config)
+    if junit is None or sharding.selection is None:
         return
     from ros_isolated_test.shard import record
     from ros_isolated_test.xunit.validate import hostname
 
-    folder = Path(os.path.abspath(os.path.expanduser(xmlpath))).parent
+    folder = junit.parent
+    name = record.file_name(sharding.selection.share)
     try:
-        record.leave(folder, selection, hostname(), __version__)
+        record.leave(folder, sharding.selection, hostname(), __version__, started=True)
     except OSError as error:
-        name = record.file_name(selection.share)
         raise pytest.UsageError(
             f"ros-isolated-test: cannot leave the shard record {name} in {folder} "
             f"({error.strerror or error}): a merge of the machines' results would not know "
             "this share reported; make the folder writable"
         ) from None
+    try:
+        if junit.is_file():
+            junit.unlink()
+    except OSError as error:
+        raise pytest.UsageError(
+            f"ros-isolated-test: cannot remove the --junit-xml file {junit} of an earlier run "
+            f"({error.strerror or error}): were this session to die, a merge would count it "
+            "as this share's results; make the folder writable"
+        ) from None
 
 
-def exit_status(sharding: Sharding, config: pytest.Config, status: int) -> int:
-    """The session's exit code: 0 rather than pytest's 5 when its share held none of its tests."""
+def complete_record(sharding: Sharding, config: pytest.Config) -> None:
+    """The record complete, once pytest wrote ``--junit-xml`` (after its sessionfinish)."""
+    junit = _junit_file(sharding, config)
+    if junit is None or sharding.selection is None or not junit.is_file():
+        return  # no file written: the started record says so to the merge
+    from ros_isolated_test.shard import record
+    from ros_isolated_test.xunit.validate import hostname
+
+    try:
+        record.leave(junit.parent, sharding.selection, hostname(), __version__)
+    except OSError as error:
+        from ros_isolated_test.pytest_plugin.interrupts import note
+
+        note(
+            f"cannot complete the shard record {record.file_name(sharding.selection.share)} "
+            f"in {junit.parent} ({error.strerror or error}): a merge will read this share "
+            "as started with no results; make the folder writable"
+        )
+
+
+def exit_status(sharding: Sharding, status: int) -> int:
+    """The session's exit code: 0 rather than pytest's 5 when the split emptied its share.
+
+    Only then: a session that selected nothing itself, or found no test, stays 5.
+    """
     if status != _NO_TESTS or sharding.selection is None:
         return status
-    controller = getattr(config.option, "dist", "no") != "no" and not hasattr(config, "workerinput")
-    return 0 if sharding.deselected or controller else status
+    return 0 if sharding.deselected else status

@@ -12,7 +12,15 @@ a test of another share left no result; what can go wrong is what the sum cannot
 - shares run under **different plans** (another N, another durations file: a job
   restarted after the file changed): then some test ran twice or not at all;
 - a test **run twice**: on two shares, or a result file of another producer found in
-  several trees (a test not run through the RUNNER or the plugin runs on every machine).
+  several trees (a test not run through the RUNNER or the plugin runs on every machine);
+- a share that **started and left no results**: a pytest session of the share that died
+  before writing its ``--junit-xml`` (SIGKILL, SIGSEGV, OOM) leaves its record
+  ``started`` and no result file of that share beside it, so its tests are not counted.
+
+A record speaks only for its own run: the machine that writes one removes every other
+record in its folder (``shard.record``), so a record an earlier run left in a reused or
+restored build folder is gone once another share runs there, and that share reads as
+missing unless its own tree is given.
 
 Each is one line (:attr:`Split.problems`); the report exits 1 on any. A report on one
 machine's own tree, where ``ROS_ISOLATED_TEST_SHARD`` says which share it is, expects
@@ -49,6 +57,9 @@ class Split:
         self._seen: dict[str, list[str]] = {}
         self._foreign: set[str] = set()
         self._odd: list[str] = []
+        #: (folder, share) of every result file that says its share.
+        self._results: set[tuple[Path, Share]] = set()
+        self._started: list[str] = []
 
     def _share(self, share: Share, plan: str, host: str) -> None:
         hosts = self.plans.setdefault((share.total, plan), {}).setdefault(share.index, set())
@@ -75,6 +86,7 @@ class Split:
             else:
                 host = next((s.attrs.get("hostname", "") for s in read.suites), "")
                 self._share(share, properties.get(PLAN_PROPERTY, "") or "?", host)
+                self._results.add((item.path.parent, share))
                 where = f"shard {share}"
         tests = named_tests(item)
         if not tests and said is None:
@@ -86,13 +98,26 @@ class Split:
             self._seen.setdefault(key, []).append(where)
 
     def add_records(self, paths: list[Path]) -> None:
-        """The records the machines left (``ros_isolated_test_shard-<I>-of-<N>.json``)."""
+        """The records the machines left (``ros_isolated_test_shard-<I>-of-<N>.json``).
+
+        After every result file (:meth:`add`): a started record is complete only with a
+        result of its share beside it.
+        """
         for path in paths:
             found = record.read(path)
             if isinstance(found, str):
                 self._odd.append(f"the record {display_text(str(path))} {found}")
-            else:
-                self._share(found.share, found.plan, found.host)
+                continue
+            self._share(found.share, found.plan, found.host)
+            if found.started and (path.parent, found.share) not in self._results:
+                share = found.share
+                self._started.append(
+                    f"shard {share.index} of {share.total} started and left no results in "
+                    f"{display_text(str(path.parent))} (its record {path.name} says started, "
+                    "and no result file of that share is beside it: its pytest session "
+                    "ended before writing --junit-xml, killed or crashed): its tests there "
+                    "are not counted; run that share again"
+                )
 
     @property
     def is_split(self) -> bool:
@@ -113,6 +138,7 @@ class Split:
         if not self.is_split:
             return []
         found = list(self._odd)
+        found += self._started
         found += self._plans_differ()
         found += self._missing()
         found += self._twice()

@@ -39,9 +39,16 @@ def header_line(policy: environment.Policy, domain_id: int, reserved: bool = Tru
         )
     elif policy.fallback is not None:
         line += "; isolation auto: by the domain ID alone, no namespaces (see below)"
-    if policy.replaced is not None:
-        line += f", replacing ROS_DOMAIN_ID {policy.replaced.value} of {policy.replaced.short}"
-    return line
+    return line + replacing(policy)
+
+
+def replacing(policy: environment.Policy) -> str:
+    """``, replacing ROS_DOMAIN_ID 14 of <tool>`` after the ID, or "".
+
+    The runner's first line and the pytest plugin's say it alike.
+    """
+    setter = policy.replaced
+    return "" if setter is None else f", replacing ROS_DOMAIN_ID {setter.value} of {setter.short}"
 
 
 def replaced_summary(

@@ -10,17 +10,27 @@ the file whole (``atomic_file``), so any number at once leave one whole record; 
 runner that finds it already there as it would write it writes nothing. Not ``.xml``:
 no reader of results (``colcon test-result``, a CI's ``**/*.xml``) takes it for one.
 
+A record speaks only for the run that left it. A folder holds one machine's results
+(a build folder restored from a cache, or reused by the next share's run, holds the
+last run's), so a writer removes every other share's or plan's record there, as the
+runners remove the other shares' stale results: an old record can never stand for a
+share whose results are gone. The pytest plugin writes its record ``started`` when the
+session starts and rewrites it complete once ``--junit-xml`` is written: a session that
+died in between (SIGKILL, SIGSEGV, OOM) leaves a started record and no results, which
+the merge names. A record without ``state`` (every RUNNER's) is complete.
+
 Written by hand, as ASCII JSON: a runner loads no ``json`` for it. Read back (by the
 report's merge) strictly: a record that is not one is named, never guessed at.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 from ros_isolated_test import atomic_file
 from ros_isolated_test.shard.spec import Share
-from ros_isolated_test.text import json_string
+from ros_isolated_test.text import display_text, json_string
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -31,20 +41,27 @@ if TYPE_CHECKING:
 PREFIX = "ros_isolated_test_shard-"
 SUFFIX = ".json"
 
-__all__ = ["PREFIX", "SUFFIX", "Record", "file_name", "is_record", "leave", "read"]
+#: The state of a record written before its results (the plugin's, at a session's start).
+STARTED = "started"
+
+__all__ = ["PREFIX", "STARTED", "SUFFIX", "Record", "file_name", "is_record", "leave", "read"]
 
 
 class Record:
     """One machine's record: its share, its plan, the host and version that wrote it."""
 
-    __slots__ = ("host", "path", "plan", "share", "version")
+    __slots__ = ("host", "path", "plan", "share", "started", "version")
 
-    def __init__(self, share: Share, plan: str, host: str, version: str, path: Path) -> None:
+    def __init__(
+        self, share: Share, plan: str, host: str, version: str, path: Path, started: bool = False
+    ) -> None:
         self.share = share
         self.plan = plan
         self.host = host
         self.version = version
         self.path = path
+        #: Written before its results, and never completed: they may never have come.
+        self.started = started
 
     def __repr__(self) -> str:
         return f"Record({self.share}, {self.plan!r}, {self.host!r})"
@@ -63,36 +80,51 @@ def is_record(name: str) -> bool:
     return bool(of) and index.isascii() and index.isdigit() and total.isascii() and total.isdigit()
 
 
-def content(selection: Selection, host: str, version: str) -> bytes:
-    """The record's bytes: the same from every runner of one machine."""
+def content(selection: Selection, host: str, version: str, started: bool = False) -> bytes:
+    """The record's bytes: the same from every runner of one machine; ``started``: a state."""
     share = selection.share
-    fields = (
+    fields = [
         ("shard", json_string(str(share), True)),
         ("index", str(share.index)),
         ("total", str(share.total)),
         ("plan", json_string(selection.plan_name, True)),
         ("host", json_string(host, True)),
         ("version", json_string(version, True)),
-    )
+    ]
+    if started:
+        fields.append(("state", json_string(STARTED, True)))
     body = ",\n".join(f'  "{name}": {value}' for name, value in fields)
     return f"{{\n{body}\n}}\n".encode("ascii")
 
 
-def leave(folder: Path, selection: Selection, host: str, version: str) -> None:
+def leave(
+    folder: Path, selection: Selection, host: str, version: str, started: bool = False
+) -> None:
     """Leave the machine's record in ``folder`` (made if missing); raises OSError.
 
     Nothing is written when the record is there already as it would be written: on a
-    machine of many tests, only the first runner writes.
+    machine of many tests, only the first runner writes. Any other record there (another
+    share's, or another plan's: an earlier run's) is removed, written or not.
     """
-    data = content(selection, host, version)
-    path = folder / file_name(selection.share)
+    data = content(selection, host, version, started)
+    name = file_name(selection.share)
+    path = folder / name
     try:
         with open(path, "rb") as handle:
-            if handle.read(len(data) + 1) == data:
-                return
+            same = handle.read(len(data) + 1) == data
     except OSError:
-        pass  # none yet (or unreadable): written below, or the write says why not
-    atomic_file.write_atomically(path, data)
+        same = False  # none yet (or unreadable): written below, or the write says why not
+    if not same:
+        atomic_file.write_atomically(path, data)
+    _remove_others(folder, name)
+
+
+def _remove_others(folder: Path, kept: str) -> None:
+    """Remove the records in ``folder`` but ``kept``: an earlier run's, of another share."""
+    for other in os.listdir(folder):
+        if other != kept and is_record(other):
+            with contextlib.suppress(FileNotFoundError):  # another runner's removal came first
+                os.unlink(folder / other)
 
 
 def read(path: Path) -> Record | str:
@@ -109,6 +141,9 @@ def read(path: Path) -> Record | str:
         return "is not a record of ros-isolated-test (not a JSON object)"
     index, total = found.get("index"), found.get("total")
     plan, host, version = found.get("plan"), found.get("host", ""), found.get("version", "")
+    state = found.get("state", "complete")
+    if state not in ("complete", STARTED):
+        return f"is not a record of ros-isolated-test (state {display_text(str(state))!r})"
     if not (
         type(index) is int
         and type(total) is int
@@ -125,4 +160,4 @@ def read(path: Path) -> Record | str:
         return f"names no share: {error}"
     if file_name(share) != os.path.basename(path):
         return f"says shard {share}, which its name does not"
-    return Record(share, plan, host, version, path)
+    return Record(share, plan, host, version, path, started=state == STARTED)

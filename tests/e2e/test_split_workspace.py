@@ -7,10 +7,12 @@ Tested once whole, then as three machines would (``ROS_ISOLATED_TEST_SHARD=I/3``
 durations file written by ``report --durations`` from the whole run), one after another
 on the one build, each machine's results copied away as CI uploads them (the results of
 the last run stay in the build, as a build folder restored from a cache holds them: a
-test of another share must clear its own). Then the merge: each test ran in exactly one
-share, ctest showed the others skipped, the merged counts are the whole run's, the page
-shows every test once in Chromium; a share left out, or one run under another plan, is
-named and fails the merge.
+test of another share must clear its own; share 3 even meets share 2's records, and
+must clear them too). Then the merge: each test ran in exactly one share, ctest showed
+the others skipped, the merged counts are the whole run's, the page shows every test
+once in Chromium; a share left out (share 2, whose records share 3's build held), or one
+run under another plan, is named and fails the merge, as is a share whose pytest session
+was killed mid-run.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ PYTHON = "split_py"
 #: Items of the ament_cmake package's pytest (one ctest test, run whole by one share).
 PYTEST_ITEMS = 4
 PY_ITEMS = 8
+#: Set: the ament_python package's pytest session kills itself at its first item.
+KILL = "SPLIT_KILL_SESSION"
 TEST = "colcon test --parallel-workers 3 --ctest-args -j3"
 MANIFEST = """<?xml version="1.0"?>
 <package format="3">
@@ -105,9 +109,12 @@ def _generate(src: Path) -> None:
     (folder / "setup.py").write_text(SETUP.format(name=PYTHON))
     (folder / "package.xml").write_text(MANIFEST.format(name=PYTHON, build="ament_python"))
     (folder / "test" / "test_py.py").write_text(
-        "import time\n\n"
+        "import os, signal, time\n\n"
         + "".join(
-            f"def test_py_{n}():\n    time.sleep({0.02 * n:.2f})\n\n" for n in range(PY_ITEMS)
+            f"def test_py_{n}():\n    time.sleep({0.02 * n:.2f})\n"
+            f"    if os.environ.get('{KILL}'):\n"
+            "        os.kill(os.getpid(), signal.SIGKILL)\n\n"
+            for n in range(PY_ITEMS)
         )
     )
 
@@ -125,22 +132,32 @@ class Split:
         self.trees: dict[str, Path] = {}
         self.ctest: dict[str, dict[str, etree._Element]] = {}
 
-    def shell(self, line: str, extra: Mapping[str, str] | None = None) -> str:
+    def shell(self, line: str, extra: Mapping[str, str] | None = None, fails: bool = False) -> str:
+        """``line`` run by bash; it must succeed (or, ``fails``, must not)."""
         done = subprocess.run(
             ["bash", "-c", line], cwd=self.root, env={**self.env, **(extra or {})},
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, check=False,
         )  # fmt: skip
-        if done.returncode != 0:
-            raise AssertionError(f"{line} failed:\n{done.stdout}")
+        if (done.returncode != 0) != fails:
+            raise AssertionError(f"{line} exited {done.returncode}:\n{done.stdout}")
         return done.stdout
 
-    def test(self, name: str, extra: Mapping[str, str] | None = None) -> Path:
+    def test(
+        self,
+        name: str,
+        extra: Mapping[str, str] | None = None,
+        keep_records: bool = False,
+        fails: bool = False,
+    ) -> Path:
         """``colcon test`` once; its results copied to a tree of their own, as CI uploads them.
 
         The results stay in the build (the next run meets them as a restored build folder
-        holds them); the machine's records go, as a fresh machine has none.
+        holds them); the machine's records go, as a fresh machine has none, unless
+        ``keep_records``: the next run meets them too, as in a build folder reused whole.
         """
-        self.shell(TEST, extra)
+        said = self.shell(TEST, extra, fails)
+        if fails:
+            assert f"1 package failed: {PYTHON}" in said, said
         build = self.root / "build"
         tree = self.root / "trees" / name
         for package in CMAKE:
@@ -154,14 +171,16 @@ class Split:
             if found.name == "pytest.xml" or found.name.startswith("ros_isolated_test_shard-"):
                 shutil.copy(found, tree / PYTHON / found.name)
         for stale in build.glob("**/ros_isolated_test_shard-*.json"):
-            stale.unlink()
+            if not keep_records:
+                stale.unlink()
         self.trees[name] = tree
         return tree
 
 
 @pytest.fixture(scope="module")
 def split(tmp_path_factory: pytest.TempPathFactory, module_env: dict[str, str]) -> Split:
-    """Built once; tested whole, as three shares by its durations, and one share by count."""
+    """Built once; tested whole, as three shares by its durations, one share by count, and
+    share 1 again with its ament_python session killed mid-run."""
     root = tmp_path_factory.mktemp("split")
     _generate(root / "src")
     env = {**module_env, "ROS_ISOLATED_TEST_DOMAINS": ",".join(map(str, free_ids(8)))}
@@ -181,8 +200,14 @@ def split(tmp_path_factory: pytest.TempPathFactory, module_env: dict[str, str]) 
                 "ROS_ISOLATED_TEST_SHARD": f"{index}/{SHARES}",
                 "ROS_ISOLATED_TEST_DURATIONS": str(durations),
             },
+            keep_records=index == 2,  # share 3 runs in share 2's build folder, records and all
         )
     ws.test("by-count-2", {"ROS_ISOLATED_TEST_SHARD": f"2/{SHARES}"})
+    killed = {
+        "ROS_ISOLATED_TEST_SHARD": f"1/{SHARES}",
+        "ROS_ISOLATED_TEST_DURATIONS": str(durations),
+    }
+    ws.test("killed-1", {**killed, KILL: "1"}, fails=True)
     return ws
 
 
@@ -287,11 +312,32 @@ def test_the_merged_page_shows_every_test_once(split: Split) -> None:
 
 
 def test_a_share_left_out_fails_the_merge_naming_it(split: Split) -> None:
+    """Share 2 is lost, though share 3 ran in its build folder: share 3's runners and
+    pytest session removed share 2's records there, so none stands for share 2."""
     trees = _shard_trees(split)
+    assert sorted(path.name for path in trees[2].glob("**/ros_isolated_test_shard-*.json")) == [
+        "ros_isolated_test_shard-3-of-3.json"
+    ] * (len(CMAKE) + 1)
     short = _report(split, trees[0], trees[2], json_out=False)
-    assert short.returncode == 1
+    assert short.returncode == 1, short.stdout
     assert "- shard 2 of 3 left no results (no record ros_isolated_test_shard-2-of-3.json" in (
         short.stdout
+    )
+
+
+def test_a_share_whose_pytest_session_was_killed_fails_the_merge_naming_it(split: Split) -> None:
+    """Share 1 again in the reused build, its ament_python session SIGKILLed mid-run: its
+    record says started, no pytest.xml is there (the last run's was removed at the start,
+    not taken for this one's), and the merge names it. The control: share 1 whole
+    (test_the_merged_report_counts_what_the_whole_run_counted)."""
+    trees = _shard_trees(split)
+    killed = split.trees["killed-1"]
+    assert not (killed / PYTHON / "pytest.xml").exists()
+    merged = _report(split, killed, trees[1], trees[2], json_out=False)
+    assert merged.returncode == 1, merged.stdout
+    (line,) = [line for line in merged.stdout.splitlines() if "started and left" in line]
+    assert line.startswith(
+        f"- shard 1 of {SHARES} started and left no results in {killed / PYTHON} ("
     )
 
 

@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from helpers import capabilities
 from helpers.commands import CLI, HUNG
+from helpers.distros import KILTED
 from helpers.pytest_sessions import (
     NO_ID_EXIT,
     PYTEST,
@@ -94,6 +97,36 @@ def test_under_the_runner_it_uses_the_runners_id(
     assert done.stdout.startswith(f"Running with ROS_DOMAIN_ID {domain} (Gazebo partition ")
     assert recorded(tmp_path)["ROS_DOMAIN_ID"] == domain
     assert f"ros-isolated-test: ROS_DOMAIN_ID {domain}, held by the runner" in done.stdout
+
+
+@pytest.mark.ros
+@capabilities.KILTED.mark
+def test_an_id_kilteds_fixture_set_is_said_replaced_as_the_runner_says_it(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """Kilted's real run_rmw_isolated around pytest: the header's first line says whose ID
+    it replaced, in the runner's words; the control: the runner under the same fixture."""
+    fixture = KILTED.run_rmw_isolated
+    assert fixture is not None
+    kilted = KILTED.env(env)
+    root = project(tmp_path / "pkg", "def test_x():\n    pass\n")
+    done = run_in(root, kilted, [str(fixture), str(KILTED.python), *PYTEST[1:], "test"])
+    assert done.returncode == 0, done.stdout + done.stderr
+    said = header_lines(done.stdout)
+    replaced = re.search(r"ROS_DOMAIN_ID (\d+) was set by Kilted's rmw_test_fixture", "".join(said))
+    assert replaced is not None, said
+    assert re.match(
+        rf"ros-isolated-test: ROS_DOMAIN_ID \d+, replacing ROS_DOMAIN_ID {replaced[1]} of "
+        "Kilted's rmw_test_fixture(,|$)",
+        said[0],
+    ), said
+    runner = run_in(root, kilted, [str(fixture), str(KILTED.cli), "run", "--", "true"])
+    assert runner.returncode == 0, runner.stdout + runner.stderr
+    assert re.match(
+        r"Running with ROS_DOMAIN_ID \d+ .*, replacing ROS_DOMAIN_ID \d+ of Kilted's "
+        "rmw_test_fixture$",
+        runner.stdout.splitlines()[0],
+    ), runner.stdout
 
 
 def test_a_mark_for_another_id_is_no_runner(tmp_path: Path, plain_env: dict[str, str]) -> None:

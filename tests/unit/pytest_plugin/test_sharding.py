@@ -1,17 +1,21 @@
 """``sharding``: a pytest session runs its share of a split, test by test, as real sessions.
 
 Each share's session deselects the others' items (they are not in its ``--junit-xml``),
-names every item it keeps by its identity, records its share beside the file, and exits
-0 when its share held none of the package's tests. Every bad value is pytest's usage
-error naming the variable or option; under a runner's ID nothing is split again. Each
-beside its control.
+names every item it keeps by its identity, records its share beside the file (started
+until the file is written: a session killed mid-run fails the merge), and exits 0 when
+the split emptied its share (and only then: pytest's 5 stays 5). Every bad value is
+pytest's usage error naming the variable or option; under a runner's ID nothing is split
+again. Each beside its control.
 """
 
 from __future__ import annotations
 
+import json
+import signal
 from pathlib import Path
 
 import pytest
+from helpers.commands import run_cli
 from helpers.pytest_sessions import header_lines, project, run_pytest
 from lxml import etree
 
@@ -155,3 +159,83 @@ def test_under_a_runners_id_nothing_is_split_again(tmp_path: Path, env: dict[str
     # The control: the same option, not under a runner's ID, splits.
     alone = run_pytest(root, env, "--ros-isolated-test-shard", "1/3", "test")
     assert "deselected" in alone.stdout
+
+
+def test_only_a_share_the_split_emptied_turns_5_into_0(tmp_path: Path, env: dict[str, str]) -> None:
+    """A session that selected nothing itself, or a package of no tests (under xdist too),
+    is pytest's 5 under a split as without; a share the split emptied passes, alone or
+    under xdist (its workers tell the controller what they deselected)."""
+    root = project(tmp_path / "pkg", "def test_only():\n    pass\n")
+    here = select({SHARD_ENV: "1/3"})
+    assert here is not None
+    mine = here.share_of("pkg", "test/test_it.py::test_only")
+    elsewhere = {**env, SHARD_ENV: f"{mine % 3 + 1}/3"}
+    nothing = run_pytest(root, {**env, SHARD_ENV: f"{mine}/3"}, "-k", "nomatch", "test")
+    assert nothing.returncode == 5, nothing.stdout + nothing.stderr
+    empty = project(tmp_path / "empty", "")
+    for args in ([], ["-n", "2"]):
+        done = run_pytest(empty, elsewhere, *args, "test")
+        assert done.returncode == 5, (args, done.stdout + done.stderr)
+    # The controls: the split emptied the share.
+    for args in ([], ["-n", "2"]):
+        done = run_pytest(root, elsewhere, *args, "test")
+        assert done.returncode == 0, (args, done.stdout + done.stderr)
+
+
+#: Every test kills its session when $KILL names a signal: SIGKILL or SIGSEGV mid-run.
+KILLING = "import os, signal\n\n" + "".join(
+    f"def test_{n}():\n"
+    "    if os.environ.get('KILL'):\n"
+    "        os.kill(os.getpid(), getattr(signal, os.environ['KILL']))\n\n"
+    for n in range(6)
+)
+
+
+@pytest.mark.parametrize("signal_name", ["SIGKILL", "SIGSEGV"])
+def test_a_share_whose_session_died_fails_the_merge_naming_it(
+    tmp_path: Path, env: dict[str, str], signal_name: str
+) -> None:
+    """Share 1's session dies mid-run: its started record, no --junit-xml (an earlier
+    one there is removed at the start), and the merge names it. The control: the same
+    sessions not killed merge whole, exit 0."""
+    root = project(tmp_path / "pkg", KILLING)
+    out = {index: tmp_path / f"share{index}" / "pytest.xml" for index in (1, 2)}
+
+    def share(index: int, **extra: str) -> int:
+        done = run_pytest(root, {**env, SHARD_ENV: f"{index}/2", **extra},
+                          f"--junit-xml={out[index]}", "test")  # fmt: skip
+        return done.returncode
+
+    assert (share(1), share(2)) == (0, 0)
+    merged = run_cli(["report", str(out[1].parent), str(out[2].parent)], env)
+    assert merged.returncode == 0, merged.stdout + merged.stderr
+    assert "Summary: 6 tests, 0 errors" in merged.stdout
+    record = out[1].parent / "ros_isolated_test_shard-1-of-2.json"
+    assert "state" not in json.loads(record.read_text())
+    assert share(1, KILL=signal_name) == -getattr(signal, signal_name)
+    assert not out[1].exists()
+    assert json.loads(record.read_text())["state"] == "started"
+    merged = run_cli(["report", str(out[1].parent), str(out[2].parent)], env)
+    assert merged.returncode == 1, merged.stdout + merged.stderr
+    assert f"- shard 1 of 2 started and left no results in {out[1].parent} (" in merged.stdout
+
+
+def test_the_package_xml_that_switches_the_plugin_on_names_the_items(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """pytest's rootdir above the package (no package.xml there): the one walk finds the
+    manifest of the test path, which both switches the plugin on and names the items; the
+    control: rootdir in the package, named alike."""
+    workspace = tmp_path / "ws"
+    root = project(workspace / "src" / "mine", "def test_only():\n    pass\n")
+    (root / "package.xml").write_text("<package format='3'><name>mine</name></package>\n")
+    names = []
+    for rootdir in (f"--rootdir={workspace}", f"--rootdir={root}"):
+        junit = tmp_path / "pytest.xml"
+        done = run_pytest(workspace, {**env, SHARD_ENV: "1/1"}, rootdir, f"--junit-xml={junit}",
+                          "src/mine/test")  # fmt: skip
+        assert done.returncode == 0, done.stdout + done.stderr
+        names += _junit(junit)[0]
+    assert names == [
+        "mine/src/mine/test/test_it.py::test_only", "mine/test/test_it.py::test_only"
+    ]  # fmt: skip

@@ -2,8 +2,9 @@
 
 The machines' trees (``helpers.split_trees``: what the runners and the plugin leave) are
 read as ``report`` reads them. A complete split says nothing wrong; a missing share, two
-plans, a test run twice or a producer's file in several trees is one line each, beside
-its control. The page shows the problems first and a group of timeline rows per machine.
+plans, a test run twice, a producer's file in several trees or a share's session that
+started and left no results is one line each, beside its control. The page shows the
+problems first and a group of timeline rows per machine.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from helpers.split_trees import runner_file, split_trees
 from ros_isolated_test.report import html_report
 from ros_isolated_test.report.shards import Split
 from ros_isolated_test.report.tree import read_tree
+from ros_isolated_test.shard import record
 from ros_isolated_test.shard.durations import measured
 from ros_isolated_test.shard.selection import Selection
 from ros_isolated_test.shard.spec import Share
@@ -56,6 +58,21 @@ def test_a_missing_share_is_named_and_one_that_ran_nothing_is_not(tmp_path: Path
     (problem,) = _split(trees[0], trees[1], trees[3]).problems
     assert problem.startswith(
         "shard 3 of 4 left no results (no record ros_isolated_test_shard-3-of-4.json"
+    )
+
+
+def test_a_started_record_with_no_result_beside_it_is_named(tmp_path: Path) -> None:
+    """A pytest session of share 1 died before writing its file; the control: a started
+    record whose session did write it (killed after) is no problem."""
+    trees = split_trees(tmp_path, TESTS, 2)
+    folder = trees[0] / "py_pkg"
+    record.leave(folder, Selection(Share(1, 2), None), "machine-1", "0.1.0", started=True)
+    assert _split(*trees).problems == []
+    (folder / "pytest.xml").unlink()
+    (problem,) = _split(*trees).problems
+    assert problem.startswith(
+        f"shard 1 of 2 started and left no results in {folder} (its record "
+        "ros_isolated_test_shard-1-of-2.json says started"
     )
 
 

@@ -178,3 +178,39 @@ def test_the_test_never_sees_the_split_its_runner_decided(
     names = {line.split("=", 1)[0] for line in seen.read_text().splitlines()}
     assert SHARD_ENV not in names and DURATIONS_ENV not in names
     assert "ROS_ISOLATED_TEST_HELD_DOMAIN_ID" in names  # the control: the test's env is read
+
+
+def _run_share(folder: Path, share: str, env: dict[str, str], tests: int) -> None:
+    """``run --shard`` of each of ``tests`` tests of pkg, results in ``folder``."""
+    for n in range(tests):
+        done = run_cli(
+            ["run", "--shard", share, "--package-name", "pkg",
+             "--junit-xml", str(folder / f"t{n}.xml"), "--", "true"], env,
+        )  # fmt: skip
+        assert done.returncode in (0, 77), done.stdout + done.stderr
+
+
+def test_a_share_run_where_another_ran_leaves_no_record_of_the_other(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """Share 3's tree copied as share 2's folder (a restored build): share 2's runners
+    remove share 3's results and its record too, so a merge without share 3's own tree
+    says it is missing. The control: the merge of all three trees is whole."""
+    for index in (1, 2, 3):
+        _run_share(tmp_path / f"shard-{index}", f"{index}/3", env, 8)
+    whole = run_cli(["report", *(str(tmp_path / f"shard-{i}") for i in (1, 2, 3))], env)
+    assert whole.returncode == 0, whole.stdout + whole.stderr
+    assert "Summary: 8 tests, 0 errors" in whole.stdout
+    reused = tmp_path / "m2"
+    reused.mkdir()
+    for found in (tmp_path / "shard-3").iterdir():
+        (reused / found.name).write_bytes(found.read_bytes())
+    _run_share(reused, "2/3", env, 8)
+    assert sorted(path.name for path in reused.glob("*.json")) == [
+        "ros_isolated_test_shard-2-of-3.json"
+    ]
+    merged = run_cli(["report", str(tmp_path / "shard-1"), str(reused)], env)
+    assert merged.returncode == 1, merged.stdout + merged.stderr
+    assert "- shard 3 of 3 left no results (no record ros_isolated_test_shard-3-of-3.json" in (
+        merged.stdout
+    )

@@ -1,7 +1,9 @@
 """``shard.record``: the record a machine of a split leaves, whole however many write it.
 
 The bytes are JSON (ASCII, any host name), the same from every runner of a machine;
-many writers at once leave one whole record; a record that is not one is named.
+many writers at once leave one whole record; a record that is not one is named. A
+record speaks for its run only: leaving one removes an earlier run's records of other
+shares or plans in its folder; a record written before its results says ``started``.
 """
 
 from __future__ import annotations
@@ -64,6 +66,47 @@ def test_a_record_already_there_as_it_would_be_is_not_written_again(tmp_path: Pa
     # The control: another host's record replaces it (a rename: a new file).
     record.leave(tmp_path, _selection(), "other", "1")
     assert path.stat().st_ino != before
+
+
+def test_a_record_left_removes_the_other_records_in_its_folder(tmp_path: Path) -> None:
+    """An earlier run's records there (another share, another N) go; the control: other
+    files, and a record in another folder, stay."""
+    record.leave(tmp_path, _selection("3/4"), "host", "1")
+    record.leave(tmp_path, _selection("1/2"), "host", "1")  # not there: a file of its own
+    (tmp_path / "ros_isolated_test_shard-1-of-4.json").write_text("{")
+    (tmp_path / "t.xml").write_text("<testsuite/>")
+    (tmp_path / "sub").mkdir()
+    record.leave(tmp_path / "sub", _selection("3/4"), "host", "1")
+    assert sorted(path.name for path in tmp_path.glob("*.json")) == [
+        "ros_isolated_test_shard-1-of-2.json", "ros_isolated_test_shard-1-of-4.json"
+    ]  # fmt: skip
+    record.leave(tmp_path, _selection("2/4"), "host", "1")
+    assert sorted(path.name for path in tmp_path.iterdir()) == [
+        "ros_isolated_test_shard-2-of-4.json", "sub", "t.xml"
+    ]  # fmt: skip
+    assert [path.name for path in (tmp_path / "sub").iterdir()] == [
+        "ros_isolated_test_shard-3-of-4.json"
+    ]
+    # Already there as it would be written: the others go all the same.
+    (tmp_path / "ros_isolated_test_shard-4-of-4.json").write_text("{}")
+    record.leave(tmp_path, _selection("2/4"), "host", "1")
+    assert not (tmp_path / "ros_isolated_test_shard-4-of-4.json").exists()
+
+
+def test_a_started_record_says_so_and_one_without_a_state_is_complete(tmp_path: Path) -> None:
+    path = tmp_path / "ros_isolated_test_shard-2-of-4.json"
+    record.leave(tmp_path, _selection(), "host", "1", started=True)
+    assert json.loads(path.read_bytes())["state"] == "started"
+    found = record.read(path)
+    assert isinstance(found, record.Record) and found.started
+    # Completed: the bytes every RUNNER writes, no state (as records before states were).
+    record.leave(tmp_path, _selection(), "host", "1")
+    assert "state" not in json.loads(path.read_bytes())
+    found = record.read(path)
+    assert isinstance(found, record.Record) and not found.started
+    path.write_text('{"index": 2, "total": 4, "plan": "count", "state": "odd"}')
+    said = record.read(path)
+    assert isinstance(said, str) and "state 'odd'" in said, said
 
 
 @pytest.mark.parametrize(
