@@ -213,10 +213,7 @@ def header(ctx: Context, network: str, command: str) -> str:
             f"- Date: {now}; command: `{command}`; ros-isolated-test at {_commit()}",
             f"- Machine: {usable} of {cpus} CPUs usable, {_cpu_model()}, {_memory()} memory, "
             f"Linux {platform.release()}; load average at start {load}",
-            f"- Python: {platform.python_implementation()} {platform.python_version()}; "
-            f"ours vs Jazzy upstream both under the Jazzy venv's `{sys.executable}`, ours vs "
-            f"Kilted upstream both under the Kilted venv's `{ctx.python_of(KILTED)}` (each "
-            f"with that venv's environment, as its sourced setup gives it)",
+            python_line(ctx),
             f"- Interpreter start-up (`python -u -c pass`, median of {reps}): {ms(warm)} as "
             f"under colcon (the ROS wheels' re-exec already done), {ms(cold)} from a plain "
             f"shell (the wheels re-execute the interpreter once)",
@@ -225,6 +222,20 @@ def header(ctx: Context, network: str, command: str) -> str:
             + "".join(f"; {LABELS[r]}: not measured ({why})" for r, why in ctx.missing.items()),
             f"- Network: {network}; lock directory private to this run; bytecode cached",
         ]
+    )
+
+
+def python_line(ctx: Context) -> str:
+    """The header's interpreters: each pair's venv, or why the Kilted pair is not measured."""
+    kilted = (
+        f"ours vs Kilted upstream: not measured ({ctx.missing.get(KILTED, 'not set up')})"
+        if KILTED in ctx.missing or KILTED not in ctx.runners
+        else f"ours vs Kilted upstream both under the Kilted venv's `{ctx.python_of(KILTED)}`"
+    )
+    return (
+        f"- Python: {platform.python_implementation()} {platform.python_version()}; "
+        f"ours vs Jazzy upstream both under the Jazzy venv's `{ctx.python_of(UPSTREAM)}`; "
+        f"{kilted} (each pair with its venv's environment, as its sourced setup gives it)"
     )
 
 

@@ -72,11 +72,22 @@ Environment:
 """
 
 
+#: ``--version``: which copy answers and on which Python, for bug reports and for a machine
+#: with more than one install (apt's under /opt/ros, a venv's, a workspace's).
+VERSION_MESSAGE = "\n".join(
+    (
+        "%(prog)s %(version)s",
+        f"installed in {Path(__file__).resolve().parent}".replace("%", "%%"),
+        f"Python {sys.version.split()[0]} ({sys.executable})".replace("%", "%%"),
+    )
+)
+
+
 @click.group(
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
     epilog=ENVIRONMENT_HELP,
 )
-@click.version_option(__version__, prog_name="ros-isolated-test")
+@click.version_option(__version__, prog_name="ros-isolated-test", message=VERSION_MESSAGE)
 def cli() -> None:
     """Run ROS 2 tests in parallel, each on a ROS_DOMAIN_ID of its own.
 
@@ -262,20 +273,20 @@ def run(
             isolation=isolation,
         )
         split = share.read(os.environ, shard)
+        request = RunRequest(
+            command=command,
+            mode=Mode.SHELL,
+            result_file=junit_xml,
+            package_name=package_name,
+            output_file=output_file,
+            generate_result_on_success=True,
+            timeout=timeout,
+            kill_grace=kill_grace,
+            settings=config,
+            shard=split,
+        )
     except (settings.SettingsError, ShardSettingError) as error:
         sys.exit(session.report_usage_error(str(error), junit_xml))
-    request = RunRequest(
-        command=command,
-        mode=Mode.SHELL,
-        result_file=junit_xml,
-        package_name=package_name,
-        output_file=output_file,
-        generate_result_on_success=True,
-        timeout=timeout,
-        kill_grace=kill_grace,
-        settings=config,
-        shard=split,
-    )
     sys.exit(session.run(request))
 
 

@@ -6,7 +6,10 @@ one of two ways:
 - **a runner's file** (one suite, ``<package>.<test>``, with our ``runner_version``): the
   ctest test ``<test>`` of ``<package>``, as the RUNNER decided for it; it took its
   ``duration`` property (the last attempt's run, what a rerun-free run takes), else the
-  suite's time. A file that says the test was not run measured nothing.
+  suite's time. A file that says the test was not run measured nothing. The placeholder
+  a killed runner left (a ctest TIMEOUT) measured at least the time until the test's own
+  file was written (``xunit.placeholder.killed_seconds``), else nothing: never the 0 s
+  of its suite, which would plan the slowest tests as instant.
 - **pytest's own file, written under the plugin**: each case that carries the
   ``ros_isolated_test_identity`` property is the item it names; it took the case's time.
 
@@ -24,6 +27,11 @@ from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.shard.durations import Durations, measured, merge
 from ros_isolated_test.shard.identity import SEPARATOR, IdentityError, identity, split
 from ros_isolated_test.xunit.canonical import test_name_of
+from ros_isolated_test.xunit.placeholder import KILLED, WRITTEN_AT, killed_seconds
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from ros_isolated_test.xunit.model import Case
 
 #: The suite property a runner records its test's run time in (``runner.verdict``).
 DURATION_PROPERTY = "duration"
@@ -70,10 +78,20 @@ def _runner_test(item: FileRead) -> list[tuple[str, float | None]]:
         return []
     properties = suite.properties
     seconds = None
-    if properties.get("exit") != "not run":
-        said = properties.get(DURATION_PROPERTY) or suite.attrs.get("time", "")
-        seconds = _seconds(said)
+    if properties.get("exit") == "not run":
+        pass
+    elif DURATION_PROPERTY in properties:
+        seconds = _seconds(properties[DURATION_PROPERTY])
+    elif WRITTEN_AT in properties:
+        seconds = killed_seconds(item.path, properties)  # the runner was killed
+    elif not _killed_before(item.cases):
+        seconds = _seconds(suite.attrs.get("time", ""))
     return [(identity(package, test), seconds)]
+
+
+def _killed_before(cases: list[Case]) -> bool:
+    """Whether the file is the placeholder of a runner older than :data:`WRITTEN_AT`."""
+    return any(KILLED in case.message for case in cases)
 
 
 class Gathered:

@@ -57,7 +57,11 @@ class EnvAssignment:
 
 
 class RunRequest:
-    """Everything needed to reserve a domain, run one test and write its result."""
+    """Everything needed to reserve a domain, run one test and write its result.
+
+    With a ``shard``, a package or test name no split can name raises
+    :class:`~ros_isolated_test.shard.identity.PackageNameError`, a usage error.
+    """
 
     __slots__ = (
         "command",
@@ -113,6 +117,12 @@ class RunRequest:
         #: This machine's share of a split (``ROS_ISOLATED_TEST_SHARD``), read once by the
         #: entry point; None: no split, every test runs.
         self.shard = shard
+        if shard is not None:
+            # A split names the test <package>/<test>: a name that cannot form one is a
+            # usage error here, where each entry point reports it, not a crash later.
+            from ros_isolated_test.shard.identity import checked
+
+            checked(self.package, self.test_name)
 
     def command_writing_to(self, own_result: Path) -> tuple[str, ...]:
         """The command with the result path it names pointed at ``own_result`` instead.

@@ -339,10 +339,27 @@ def write(path: Path, durations: Durations, origin: str = "--durations") -> None
     try:
         atomic_file.write_atomically(path, durations.text().encode("ascii"))
     except OSError as error:
-        fix = "choose a writable file path"
+        why, fix = error.strerror or str(error), "choose a writable file path"
         if isinstance(error, atomic_file.NotReplaceableError):
             fix = "name a regular file instead"
+        in_the_way = _not_a_folder(path)
+        if in_the_way is not None:
+            # mkdir says "File exists" (or "Not a directory"): name what is in the way.
+            shown = display_text(str(in_the_way))
+            why, fix = f"{shown} is a file, not a folder", "name a path in a folder instead"
         raise DurationsError(
-            f"{named(origin, display_text(str(path)))}: cannot write it: "
-            f"{error.strerror or error}; {fix}"
+            f"{named(origin, display_text(str(path)))}: cannot write it: {why}; {fix}"
         ) from None
+
+
+def _not_a_folder(path: Path) -> Path | None:
+    """The nearest existing folder of ``path`` that is no folder at all (a file), if any."""
+    for parent in path.parents:
+        try:
+            mode = os.stat(parent).st_mode
+        except (FileNotFoundError, NotADirectoryError):
+            continue  # missing, or a file further up: the loop meets it
+        except OSError:
+            return None
+        return None if stat.S_ISDIR(mode) else parent
+    return None

@@ -17,13 +17,23 @@ Python and every process draws the same share (``hash()`` is salted per process)
 from __future__ import annotations
 
 from ros_isolated_test.shard.digest import sha256
+from ros_isolated_test.shard.spec import ShardSettingError, named
 
 SEPARATOR = "/"
 #: The testcase property a pytest item's identity is recorded under in pytest's
 #: ``--junit-xml`` file (the plugin adds it), so ``report --durations`` can name the item.
 PROPERTY = "ros_isolated_test_identity"
 
-__all__ = ["PROPERTY", "SEPARATOR", "IdentityError", "identity", "split", "spread"]
+__all__ = [
+    "PROPERTY",
+    "SEPARATOR",
+    "IdentityError",
+    "PackageNameError",
+    "checked",
+    "identity",
+    "split",
+    "spread",
+]
 
 
 class IdentityError(ValueError):
@@ -40,6 +50,32 @@ def identity(package: str, name: str) -> str:
     if not name:
         raise IdentityError(f"package {package!r}: a test needs a name")
     return f"{package}{SEPARATOR}{name}"
+
+
+class PackageNameError(ShardSettingError):
+    """A test an entry point was asked to run in a split that no identity can name."""
+
+
+def checked(package: str, name: str, origin: str = "--package-name") -> str:
+    """The identity of a test an entry point runs in a split, or a one-line usage error.
+
+    Checked when the request is read, before anything runs: a package name with a ``/``
+    would otherwise surface as a traceback when the split places the test. ``origin``
+    is the option that named the package.
+    """
+    try:
+        return identity(package, name)
+    except IdentityError:
+        if SEPARATOR in package:
+            raise PackageNameError(
+                f"{named(origin, repr(package))} cannot name a test of a split: a package "
+                f"name has no {SEPARATOR!r} (a test is <package>{SEPARATOR}<test> in every "
+                "share); give the package's own name, as its package.xml says"
+            ) from None
+        raise PackageNameError(
+            f"{named(origin, repr(package))}: the test {name!r} cannot be placed in a split: "
+            "a package and a test each need a name; give both"
+        ) from None
 
 
 def split(text: str) -> tuple[str, str]:

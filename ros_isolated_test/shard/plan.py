@@ -9,8 +9,11 @@ once over the N machines, whichever tests exist, as long as they all read the sa
 (results record its fingerprint, so a merge can tell when they did not).
 
 - **Tests the file knows**: longest first, each onto the share with the least load so far
-  (LPT), ties broken by identity and then by the lowest share; loads are whole
-  milliseconds, so the arithmetic is exact everywhere. LPT's longest share is at most
+  (LPT); equal durations go in identity order, and equal loads to the share with the
+  fewest tests, then the lowest; loads are whole numbers, so the arithmetic is exact
+  everywhere. Tests of no measurable duration (0 in the file) cost no share any time: they
+  go to the share with the fewest tests so far, so they spread by count rather than pile
+  onto whichever share is least loaded. LPT's longest share is at most
   4/3 of the best possible, and it is far closer when there are many more tests than
   shares (its excess is at most the one test placed last on the longest share). A search
   for the exact optimum would chase the noise of the measurements themselves (a test's
@@ -42,6 +45,12 @@ __all__ = ["Placed", "Plan"]
 #: Bits of a share's index in the loads heap: room for 1023 shares (MAX_TOTAL is 1000).
 _INDEX_BITS = 10
 _INDEX_MASK = (1 << _INDEX_BITS) - 1
+#: Bits of a share's count of tests in the heap, above its index: far more tests than a
+#: durations file can hold (MAX_FILE_BYTES).
+_COUNT_BITS = 40
+_LOAD_SHIFT = _INDEX_BITS + _COUNT_BITS
+_ONE_TEST = 1 << _INDEX_BITS
+_COUNT_AND_INDEX = (1 << _LOAD_SHIFT) - 1
 
 
 class Placed:
@@ -96,13 +105,26 @@ class Plan:
         # Longest first; equal durations by identity (a stable sort of the sorted
         # identities): no dict order, no hash.
         order = sorted(durations.ordered(), key=millis.__getitem__, reverse=True)
-        # Each share's load and index in one integer, load << 10 | index: the least is
-        # the least loaded share, ties going to the lowest index.
+        # Each share's load, count of tests and index in one integer (load, then count,
+        # then index, from the top bits): the least is the least loaded share, ties going
+        # to the one with fewest tests, then to the lowest index.
         loads = list(range(1, self.total + 1))  # a heap already
+        placed = 0
         for key in order:
+            weight = millis[key]
+            if not weight:
+                break  # the rest weigh nothing (longest first): placed by count below
             least = loads[0]
             yield key, least & _INDEX_MASK
-            heapq.heapreplace(loads, least + (millis[key] << _INDEX_BITS))
+            heapq.heapreplace(loads, least + (weight << _LOAD_SHIFT) + _ONE_TEST)
+            placed += 1
+        # Weightless tests change no load: onto the share with the fewest tests so far.
+        counts = [entry & _COUNT_AND_INDEX for entry in loads]
+        heapq.heapify(counts)
+        for key in order[placed:]:
+            least = counts[0]
+            yield key, least & _INDEX_MASK
+            heapq.heapreplace(counts, least + _ONE_TEST)
 
     def _place(self, until: str | None = None) -> dict[str, int]:
         """The file's tests placed so far, placing them up to ``until`` (None: all).

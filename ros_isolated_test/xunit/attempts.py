@@ -21,7 +21,8 @@ if TYPE_CHECKING:
 
 #: Suite property: how many attempts ran.
 ATTEMPTS_PROPERTY = "attempts"
-#: Suite property: how many cases passed (or were skipped) after failing at least once.
+#: Suite property: how many cases passed after failing at least once (flaky, as ``report``
+#: counts it; a case skipped after failing is a skip).
 FLAKY_PROPERTY = "flaky_cases"
 #: Suite property: which cases were renamed so no two share a GitLab key (if any were).
 RENAMED_PROPERTY = "renamed_cases"
@@ -94,7 +95,7 @@ def merge_attempts(attempts: Sequence[Suite]) -> Suite:
             if last.properties.get(key) != value:
                 properties[f"attempt_{number}.{key}"] = value
     properties[ATTEMPTS_PROPERTY] = str(total)
-    properties[FLAKY_PROPERTY] = str(sum(1 for case in cases if case.flaky))
+    properties[FLAKY_PROPERTY] = str(sum(1 for case in cases if _passed_after_failing(case)))
     return Suite(
         name=last.name,
         cases=cases,
@@ -105,6 +106,11 @@ def merge_attempts(attempts: Sequence[Suite]) -> Suite:
         system_out=last.system_out,
         system_err=last.system_err,
     )
+
+
+def _passed_after_failing(case: Case) -> bool:
+    """Flaky as every count means it: passed in the end, with failed attempts before."""
+    return case.flaky and case.outcome is Outcome.PASSED
 
 
 def kept(attempts: list[Attempt], limit: int = ATTEMPTS_KEPT) -> list[Attempt]:

@@ -6,6 +6,11 @@ disk that filled up while the test ran), the placeholder must not stay behind sa
 the test most likely timed out. It is overwritten where it lies, in blocks it already
 holds, by a short result saying the write failed and how the test ended; the
 placeholder is written with room for that.
+
+A placeholder left behind says when it was written (:data:`WRITTEN_AT`), just before
+its attempt waited for an ID and started: with the files beside it, that gives a killed
+test's duration at least up to the last word the test wrote (:func:`killed_seconds`),
+which ``report --durations`` keeps instead of the 0 s a killed run never took.
 """
 
 from __future__ import annotations
@@ -17,11 +22,13 @@ import stat
 
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import serialise
+from ros_isolated_test.xunit.kept_files import attempt_original_of
 from ros_isolated_test.xunit.model import Suite
+from ros_isolated_test.xunit.timeline import instant
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Mapping, Sequence
     from pathlib import Path
 
     from ros_isolated_test.xunit.model import Case
@@ -40,6 +47,47 @@ _STAND_IN_PROPERTIES = (
     "ros_domain_id",
     "original_result_file",
 )
+
+
+#: What the placeholder's case says happened, if it is all there is.
+KILLED = "the runner was killed before the test ended"
+#: The placeholder's suite property: when it was written (local ISO 8601 to the
+#: microsecond, with the zone), just before its attempt waited for an ID and started.
+WRITTEN_AT = "placeholder_written_at"
+#: How far the placeholder file's mtime may be from :data:`WRITTEN_AT` for the mtimes
+#: beside it to be the run's own (a copy that did not keep them moves them all).
+_SAME_INSTANT = 2.0
+#: Suite property of a merged rerun series: how many attempts it holds (``attempts``).
+_ATTEMPTS = "attempts"
+
+
+def stamped(properties: Mapping[str, str], when: float) -> dict[str, str]:
+    """The placeholder's properties: the run's, and :data:`WRITTEN_AT` ``when``."""
+    return {**properties, WRITTEN_AT: instant(when)}
+
+
+def killed_seconds(path: Path, properties: Mapping[str, str]) -> float | None:
+    """How long the test of a placeholder left at ``path`` ran at least; None: not known.
+
+    From :data:`WRITTEN_AT` to the last write of the test's own file beside it (the
+    attempt's ``<name>.attempt<k>.orig``): a test killed after it wrote its result ran at
+    least that long (a kill at its timeout, longer). The file times count only when the
+    placeholder's own mtime is the instant it says it was written: a tree copied without
+    its times (most copies) says nothing of when the test wrote. No own file, or times
+    that are not the run's: None, never 0, since the test did run.
+    """
+    from datetime import datetime
+
+    try:
+        written = datetime.fromisoformat(properties[WRITTEN_AT]).timestamp()
+        number = int(properties.get(_ATTEMPTS, "1"))
+        if abs(os.stat(path).st_mtime - written) > _SAME_INSTANT:
+            return None
+        last = os.stat(attempt_original_of(path, number)).st_mtime
+    except (KeyError, ValueError, OverflowError, OSError):
+        return None
+    seconds = last - written
+    return seconds if 0 < seconds <= 7 * 24 * 3600 else None
 
 
 def with_room(data: bytes) -> bytes:

@@ -343,11 +343,13 @@ class ResultFile:
         if self.path is None:
             return True
         message = (
-            f"{NO_RESULT} If this is all there is, the runner was killed before the test "
-            "ended, as a ctest TIMEOUT does (SIGKILL, no chance to write anything else): "
-            "the test most likely timed out."
+            f"{NO_RESULT} If this is all there is, {placeholder.KILLED}, as a ctest "
+            "TIMEOUT does (SIGKILL, no chance to write anything else): the test most likely "
+            "timed out."
         )
-        suite = self._suite([self.case(Outcome.ERROR, message)], 0.0, dict(self.properties))
+        # When it was written: a killed test's duration counts from here (placeholder).
+        properties = placeholder.stamped(self.properties, time.time())
+        suite = self._suite([self.case(Outcome.ERROR, message)], 0.0, properties)
         suite = self._beside_earlier(suite, tuple(self._attempts) or None)
         data = placeholder.with_room(serialise.serialize(suite))
         if not self._write(data):

@@ -101,7 +101,8 @@ def test_durations_mistakes_are_one_line(env: dict[str, str], tmp_path: Path) ->
     assert unwritable.returncode == 2
     (line,) = unwritable.stderr.splitlines()
     assert line.startswith(f"ros-isolated-test: error: --durations {under_a_file}: cannot write")
-    assert line.endswith("; choose a writable file path")
+    in_the_way = f"{under_a_file.parent} is a file, not a folder"
+    assert line.endswith(f": {in_the_way}; name a path in a folder instead"), line
     # The control: the same tree, a writable file.
     runner_file(empty, "pkg/t", 2.0)
     assert run_cli(["report", "--durations", str(out), str(empty)], env).returncode == 0

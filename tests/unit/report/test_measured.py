@@ -7,15 +7,23 @@ median, a split's shards into their union.
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import signal
+import subprocess
+import time
 from pathlib import Path
 
+from helpers.commands import ament_args, run_cli, start_runner
+from helpers.processes import DEADLINE, wait_for
 from helpers.split_trees import pytest_file, runner_file, split_trees
 
 from ros_isolated_test.report.measured import Gathered, named_tests
 from ros_isolated_test.report.tree import read_file, read_tree
 from ros_isolated_test.shard.durations import measured
 from ros_isolated_test.xunit import serialise
-from ros_isolated_test.xunit.model import Case, Suite
+from ros_isolated_test.xunit.model import Case, Outcome, Suite
 
 
 def _tests(path: Path) -> list[tuple[str, float | None]]:
@@ -64,3 +72,85 @@ def test_runs_merge_into_the_median_and_shards_into_their_union(tmp_path: Path) 
             gathered.add(item)
     # Each test measured three times: 1x, 3x, 1x: the median is 1x.
     assert gathered.durations() == measured(tests)
+
+
+#: The test (argv: its result file, a state folder): says its PID, waits for ``go``, writes
+#: a passing result, says so (``wrote``), then hangs until it is killed.
+_PASS_THEN_HANG = """#!/bin/bash
+echo $$ > "$2/pid"
+while [ ! -e "$2/go" ]; do sleep 0.05; done
+echo '<testsuite name="t" tests="1"><testcase classname="t" name="ok"/></testsuite>' > "$1"
+: > "$2/wrote"
+exec sleep 600
+"""
+#: How long the harness holds the test back before it may write its pass.
+_HELD = 0.3
+
+
+def test_a_runner_killed_after_its_test_wrote_a_pass_measured_at_least_that_long(
+    tmp_path: Path,
+    env: dict[str, str],
+    runner_script: str,
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    """Issue 41 item 4: a ctest TIMEOUT's SIGKILL left the placeholder, measured as 0 s.
+
+    Every bound is an order of events: the placeholder is written before the test starts,
+    the harness holds the test ``_HELD`` seconds after it started, and kills the runner's
+    tree after the test wrote its file; so the test ran at least ``_HELD`` seconds, and
+    no longer than the harness watched it.
+    """
+    script = tmp_path / "pass_then_hang.sh"
+    script.write_text(_PASS_THEN_HANG)
+    script.chmod(0o755)
+    state = tmp_path / "state"
+    state.mkdir()
+    result = tmp_path / "tree" / "pkg" / "slow.xml"
+    before = time.time()
+    runner = start_runner(
+        runner_script,
+        ament_args(result, [str(script), str(result), str(state)]),
+        env, tmp_path / "log", started, start_new_session=True,
+    )  # fmt: skip
+    wait_for(state / "pid")  # the test started: the placeholder is in place already
+    time.sleep(_HELD)  # the test's run, which the measurement must see
+    (state / "go").touch()
+    wait_for(state / "wrote")  # the test wrote "passed", then hangs
+    os.killpg(runner.pid, signal.SIGKILL)  # as ctest's TIMEOUT ends the runner's tree
+    assert runner.wait(timeout=DEADLINE) == -signal.SIGKILL
+    watched = time.time() - before
+    assert "the runner was killed before the test ended" in result.read_text()
+    durations = tmp_path / "durations.json"
+    proc = run_cli(["report", "--durations", str(durations), str(tmp_path / "tree")], env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    seconds = json.loads(durations.read_text())["durations"]["pkg/slow"]
+    assert seconds > 0, "a killed test measured as instant"
+    assert _HELD <= seconds <= watched * 1.05, (seconds, watched)  # 1.05: two figures kept
+    # A tree copied without its times (the copy's all alike, later) cannot say when the
+    # test wrote: the test is left out, so a split weighs it as a new one, never as 0 s.
+    copy = tmp_path / "copied"
+    shutil.copytree(tmp_path / "tree", copy, copy_function=shutil.copyfile)
+    later = time.time() + 3600
+    for path in (copy / "pkg").iterdir():
+        os.utime(path, (later, later))
+    runner_file(copy, "pkg/quick", 1.0)  # the control: a test that ended is measured
+    copied = tmp_path / "copied.json"
+    proc = run_cli(["report", "--durations", str(copied), str(copy)], env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert json.loads(copied.read_text())["durations"] == {"pkg/quick": 1}
+
+
+def test_an_older_runners_placeholder_measured_nothing_not_zero(tmp_path: Path) -> None:
+    """Left by a runner from before ``placeholder_written_at``: its 0 s was never measured."""
+    from ros_isolated_test.xunit.placeholder import KILLED
+
+    folder = tmp_path / "pkg"
+    folder.mkdir()
+    message = f"The test did not generate a result file. If this is all there is, {KILLED}."
+    for name, said in (("killed", message), ("skipped", "Test skipped by developer")):
+        case = Case.saying(f"pkg.{name}", name, Outcome.ERROR, said)
+        properties = {"command": "t", "runner_version": "0.1.0"}
+        suite = Suite(f"pkg.{name}", [case], 0.0, "2026-01-01T00:00:00", "h", properties)
+        (folder / f"{name}.xml").write_bytes(serialise.serialize(suite))
+    assert _tests(folder / "killed.xml") == [("pkg/killed", None)]
+    assert _tests(folder / "skipped.xml") == [("pkg/skipped", 0.0)]  # the control

@@ -10,6 +10,7 @@ absolute, and nothing else.
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -87,3 +88,59 @@ def test_env_assignments_compare_by_value() -> None:
     assert EnvAssignment("A", "1") != EnvAssignment("A", "1", append=True)
     assert len({EnvAssignment("A", "1"), EnvAssignment("A", "1")}) == 1
     assert repr(EnvAssignment("P", "/x", True)) == "EnvAssignment('P', '/x', append=True)"
+
+
+def test_a_split_refuses_a_package_name_no_identity_can_hold() -> None:
+    """A ``/`` in the package under a split: a usage error when the request is made."""
+    from ros_isolated_test.shard.identity import PackageNameError
+    from ros_isolated_test.shard.selection import select
+    from ros_isolated_test.shard.spec import SHARD_ENV, ShardSettingError
+
+    split = select({SHARD_ENV: "1/2"})
+    with pytest.raises(PackageNameError, match=r"^--package-name 'a/b' cannot name a test"):
+        _request(("true",), Path("r/t.xml"), package_name="a/b", shard=split)
+    assert issubclass(PackageNameError, ShardSettingError)  # what every entry point reports
+    # The controls: a valid name under the split, and the same name without one.
+    assert _request(("true",), Path("r/t.xml"), package_name="a_b", shard=split).package == "a_b"
+    assert _request(("true",), Path("r/t.xml"), package_name="a/b").package == "a/b"
+
+
+@pytest.mark.parametrize("mode", ["shell", "runner"])
+def test_a_slash_in_the_package_of_a_split_is_a_usage_error_with_a_result_file(
+    tmp_path: Path, env: dict[str, str], runner_script: str, mode: str
+) -> None:
+    """Issue 41 item 5: no traceback; one line, exit 2, and the RUNNER's result file."""
+    from helpers.commands import ament, run_cli
+    from helpers.results import load_result
+
+    from ros_isolated_test.shard.spec import SHARD_ENV
+
+    result = tmp_path / "r" / "t.xml"
+    marker = tmp_path / "ran"
+
+    def started(package: str) -> subprocess.CompletedProcess[str]:
+        if mode == "shell":
+            return run_cli(
+                ["run", "--shard", "1/1", "--package-name", package, "--junit-xml", str(result),
+                 "--", "touch", str(marker)], env, cwd=tmp_path,
+            )  # fmt: skip
+        return ament(
+            runner_script, result, ["touch", str(marker)], {**env, SHARD_ENV: "1/1"},
+            "--generate-result-on-success", cwd=tmp_path, package=package,
+        )  # fmt: skip
+
+    proc = started("a/b")
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    (line,) = proc.stderr.splitlines()
+    said = "ros-isolated-test: error: --package-name 'a/b' cannot name a test"
+    assert line.startswith(said), line
+    assert "package.xml" in line  # the fix
+    assert not marker.exists()
+    case = load_result(result).only
+    assert case.outcome == "error" and "--package-name 'a/b'" in case.message
+    # The control: a valid package name runs the test (the only share of 1/1).
+    fine = started("a_b")
+    assert fine.returncode == 0, fine.stdout + fine.stderr
+    assert marker.exists()
+    assert load_result(result).properties["shard"] == "1/1"

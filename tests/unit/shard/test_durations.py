@@ -150,11 +150,27 @@ def test_writing_replaces_the_file_whole_and_never_a_device(tmp_path: Path) -> N
     assert atomic_file.special_kind(fifo) == "a FIFO"
 
 
-def test_writing_where_no_file_can_be_is_one_line(tmp_path: Path) -> None:
+@pytest.mark.parametrize("under", ["durations.json", "deeper/durations.json"])
+def test_writing_under_a_file_names_the_file_in_the_way(tmp_path: Path, under: str) -> None:
+    """Not the system's "File exists" (mkdir's word): the parent that is a file."""
     blocker = tmp_path / "a_file"
     blocker.write_text("")
+    with pytest.raises(DurationsError) as raised:
+        write(blocker / under, measured({"p/t": 1}))
+    assert str(raised.value) == (
+        f"--durations {blocker / under}: cannot write it: {blocker} is a file, not a folder; "
+        "name a path in a folder instead"
+    )
+    # The control: the same name in a folder that is missing is made, and written.
+    write(tmp_path / "folder" / under, measured({"p/t": 1}))
+    assert load(tmp_path / "folder" / under) == measured({"p/t": 1})
+
+
+def test_writing_where_no_file_can_be_is_one_line(tmp_path: Path) -> None:
+    folder = tmp_path / "a_folder"
+    (folder / "inside").mkdir(parents=True)  # a folder that is not empty: no file replaces it
     with pytest.raises(DurationsError, match=r"cannot write it: .*; choose a writable file path$"):
-        write(blocker / "durations.json", measured({"p/t": 1}))
+        write(folder, measured({"p/t": 1}))
 
 
 # --- reading: controls first, then every way a file can be wrong ---------------------------

@@ -103,3 +103,13 @@ def test_spread_does_not_depend_on_the_process() -> None:
     ]
     assert len({spreads for spreads, _ in outputs}) == 1
     assert len({salted for _, salted in outputs}) == 3  # control: hash() did differ
+
+
+def test_checked_names_the_option_and_the_fix_for_a_slash_in_the_package() -> None:
+    from ros_isolated_test.shard.identity import PackageNameError, checked
+
+    assert checked("pkg", "t") == "pkg/t"  # the control
+    with pytest.raises(PackageNameError, match=r"^--package-name 'a/b' cannot name .*package\.xml"):
+        checked("a/b", "t")
+    with pytest.raises(PackageNameError, match=r"need a name"):
+        checked("pkg", "")

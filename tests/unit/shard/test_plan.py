@@ -229,3 +229,25 @@ def test_a_thousand_shares_are_all_used_and_no_more_can_be_planned() -> None:
 def test_one_share_runs_everything() -> None:
     plan = Plan(1, measured(MEASURED))
     assert {plan.share_of(identity) for identity in [*MEASURED, "x/new"]} == {1}
+
+
+def test_tests_of_no_measured_duration_spread_by_count() -> None:
+    """Issue 41 item 8: 0 s tests went all to the least loaded share (13 of 16 on one)."""
+    mixed = {
+        **{f"p/slow_{number}": 1000 for number in range(4)},
+        **{f"p/instant_{number:02d}": 0 for number in range(12)},
+    }
+    for tests, counts in ((mixed, [6, 5, 5]), ({f"p/t{n:02d}": 0 for n in range(16)}, [6, 5, 5])):
+        durations = Durations(tests)
+        listing = Plan(3, durations).shares()
+        assert [len(share) for share in listing] == counts
+        # Still every test once, and the loads as LPT leaves them (zeros cost nothing).
+        assert sorted(test.identity for share in listing for test in share) == sorted(tests)
+        # The same answers asked one at a time, in any order, each from a plan of its own
+        # (a RUNNER), or in turn from one plan (the plugin): one plan everywhere.
+        whole = {test.identity: index for index, share in enumerate(listing, 1) for test in share}
+        assert {key: Plan(3, durations).share_of(key) for key in tests} == whole
+        names = sorted(tests)
+        random.Random(3).shuffle(names)
+        asked = Plan(3, durations)
+        assert {key: asked.share_of(key) for key in names} == whole

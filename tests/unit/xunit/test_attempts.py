@@ -139,6 +139,23 @@ def test_a_skipped_case_after_a_failure_is_flaky_and_skipped() -> None:
     assert counts_of(root) == ("1", "0", "0", "1")
 
 
+def test_flaky_cases_counts_only_cases_that_passed_after_failing() -> None:
+    """One meaning of flaky everywhere (``report``'s): a skip after failing is a skip."""
+    skipped = Case(CLASS, "a", outcome=Outcome.SKIPPED, message="no GPU")
+    merged = merge_attempts(
+        [suite_of([failed("a"), failed("b")]), suite_of([skipped, passed("b")])]
+    )
+    root = canonical_root(merged)  # checked: the property agrees with the cases
+    assert child_tags(case_node(root, "a")) == ["skipped", "flakyFailure"]
+    assert properties_of(root)["flaky_cases"] == "1"  # b alone
+    assert validate.problems(root) == []
+    # The control: the validator still catches a property that disagrees with the cases.
+    prop = root.find(".//property[@name='flaky_cases']")
+    assert prop is not None
+    prop.set("value", "2")
+    assert validate.problems(root) == [f"suite {merged.name}: property flaky_cases=2, cases say 1"]
+
+
 # --- cases that come and go --------------------------------------------------------------------
 
 
@@ -472,7 +489,7 @@ def test_random_histories_always_merge_into_valid_files_with_honest_counts() -> 
             assert finals == ([] if outcome is Outcome.PASSED else [outcome.value]), tags
             prefix = "rerun" if outcome.failed else "flaky"
             assert all(tag.startswith(prefix) for tag in tags if tag in ATTEMPT_TAGS), tags
-        flaky = sum(1 for case in merged.cases if case.flaky)
+        flaky = sum(1 for case in merged.cases if case.flaky and case.outcome is Outcome.PASSED)
         assert properties_of(root)["flaky_cases"] == str(flaky)
         assert properties_of(root)["attempts"] == str(len(attempts))
 

@@ -329,3 +329,54 @@ def test_a_rerun_whose_final_write_fails_on_a_full_disk_keeps_attempt_1_in_the_r
 
     assert done.returncode == 1, done.stderr.decode()
     _keeps_the_earlier_failure(valid_result(kept), "failed on ")
+
+
+# --- how long a killed test ran at least ------------------------------------------------------
+
+
+def _left(folder: Path, written: float, own: float | None, attempts: int = 1) -> dict[str, str]:
+    """A placeholder left at ``folder/t.xml`` at ``written``, the test's own file at ``own``."""
+    from ros_isolated_test.xunit.kept_files import attempt_original_of
+    from ros_isolated_test.xunit.placeholder import stamped
+
+    path = folder / "t.xml"
+    path.write_bytes(_placeholder())
+    os.utime(path, (written, written))
+    if own is not None:
+        mine = attempt_original_of(path, attempts)
+        mine.write_text("<testsuite/>")
+        os.utime(mine, (own, own))
+    properties = stamped({"command": "t"}, written)
+    if attempts > 1:
+        properties["attempts"] = str(attempts)
+    return properties
+
+
+def test_a_killed_test_ran_at_least_until_it_wrote_its_own_file(tmp_path: Path) -> None:
+    from ros_isolated_test.xunit.placeholder import WRITTEN_AT, killed_seconds
+
+    written = 1_800_000_000.25
+    properties = _left(tmp_path, written, written + 42.5)
+    assert WRITTEN_AT in properties
+    assert killed_seconds(tmp_path / "t.xml", properties) == pytest.approx(42.5, abs=1e-3)
+    # The attempt of a rerun series that was killed: its own file, not the first's.
+    series = tmp_path / "series"
+    series.mkdir()
+    properties = _left(series, written, written + 7.0, attempts=2)
+    assert killed_seconds(series / "t.xml", properties) == pytest.approx(7.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("why", ["no own file", "times not kept", "no stamp", "own file first"])
+def test_a_killed_test_of_no_evidence_measured_nothing_not_zero(tmp_path: Path, why: str) -> None:
+    from ros_isolated_test.xunit.placeholder import WRITTEN_AT, killed_seconds
+
+    written = 1_800_000_000.25
+    properties = _left(tmp_path, written, None if why == "no own file" else written + 42.5)
+    if why == "times not kept":  # a copy: every file the time it was copied
+        for path in tmp_path.iterdir():
+            os.utime(path, (written + 3600, written + 3600))
+    elif why == "no stamp":
+        del properties[WRITTEN_AT]
+    elif why == "own file first":  # a stale file of an earlier run
+        os.utime(tmp_path / "t.xml.attempt1.orig", (written - 5, written - 5))
+    assert killed_seconds(tmp_path / "t.xml", properties) is None
