@@ -16,8 +16,8 @@
 # A test whose RUNNER is upstream's isolated runner (ament_cmake_ros's run_test_isolated.py,
 # Jazzy's or Kilted's: ament_add_ros_isolated_*, or add_launch_test(... RUNNER
 # "${ament_cmake_ros_DIR}/run_test_isolated.py")) asked for isolation: it runs through ours
-# instead, which takes the same arguments (taken over), unless its own ENV sets
-# ROS_DOMAIN_ID (upstream's runner would run it there; ours would refuse it). Any other
+# instead, which takes the same arguments (taken over), unless its own ENV or APPEND_ENV
+# sets ROS_DOMAIN_ID (upstream's runner would run it there; ours would refuse it). Any other
 # RUNNER is kept.
 #
 # At the end of the project's directory, one status line says how many tests of the
@@ -117,7 +117,8 @@ function(_ros_isolated_test_wrap_ament_add_test)
     get_property(_resources GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_RESOURCES)
     _ros_isolated_test_env(_default_env "" "${_reruns}" "${_resources}")
     _ros_isolated_test_runner(_runner)
-    _ros_isolated_test_runner_kind(_kind "${_rit_RUNNER}" "${_runner}" "${_rit_ENV}")
+    _ros_isolated_test_runner_kind(_kind "${_rit_RUNNER}" "${_runner}" "${_rit_ENV}"
+      "${_rit_APPEND_ENV}")
     if(_kind MATCHES "^(ours|upstream)$")
       get_property(_before DIRECTORY PROPERTY TESTS)
       # Last, so it also replaces an empty RUNNER, which ament_add_test reads as "default",
@@ -140,10 +141,11 @@ cmake_policy(PUSH)
 cmake_policy(VERSION 3.15)
 
 # ${var}: how the wrapper treats a test whose RUNNER is ${runner} ("" for none), ours
-# being ${ours}, its ENV ${env}: "ours" (none, or ours), "upstream" (ament_cmake_ros's
-# run_test_isolated.py: taken over), "upstream_domain" (upstream's, but its ENV sets
-# ROS_DOMAIN_ID: kept) or "other" (kept).
-function(_ros_isolated_test_runner_kind var runner ours env)
+# being ${ours}, its ENV ${env} and APPEND_ENV ${append_env}: "ours" (none, or ours),
+# "upstream" (ament_cmake_ros's run_test_isolated.py: taken over), "upstream_domain_ENV" or
+# "upstream_domain_APPEND_ENV" (upstream's, but that keyword sets ROS_DOMAIN_ID: kept, as
+# upstream's runner would run it there and ours would refuse it) or "other" (kept).
+function(_ros_isolated_test_runner_kind var runner ours env append_env)
   if(runner STREQUAL "")
     set(${var} "ours" PARENT_SCOPE)
     return()
@@ -160,10 +162,13 @@ function(_ros_isolated_test_runner_kind var runner ours env)
     return()
   endif()
   set(${var} "upstream" PARENT_SCOPE)
-  foreach(_assignment IN LISTS env)
-    if(_assignment MATCHES "^ROS_DOMAIN_ID=")
-      set(${var} "upstream_domain" PARENT_SCOPE)
-    endif()
+  foreach(_keyword IN ITEMS APPEND_ENV ENV)
+    string(TOLOWER "${_keyword}" _list)
+    foreach(_assignment IN LISTS ${_list})
+      if(_assignment MATCHES "^ROS_DOMAIN_ID=")
+        set(${var} "upstream_domain_${_keyword}" PARENT_SCOPE)
+      endif()
+    endforeach()
   endforeach()
 endfunction()
 
@@ -207,8 +212,8 @@ function(_ros_isolated_test_record testname kind runner)
     set_property(GLOBAL APPEND PROPERTY _ROS_ISOLATED_TEST_ALL_TAKEN_OVER "${testname}")
   else()
     get_filename_component(_file "${runner}" NAME)
-    if(kind STREQUAL "upstream_domain")
-      set(_why "upstream's ${_file}, kept: its ENV sets ROS_DOMAIN_ID")
+    if(kind MATCHES "^upstream_domain_(.*)$")
+      set(_why "upstream's ${_file}, kept: its ${CMAKE_MATCH_1} sets ROS_DOMAIN_ID")
     else()
       set(_why "its own RUNNER ${_file}")
     endif()

@@ -2,7 +2,9 @@
 
 Upstream claims ID N by binding TCP port 32768+N. Binding the same port while we hold
 N keeps upstream's runner off our ID, and failing to bind it tells us upstream (or
-another program) has N, so both coordinators can share one machine.
+another program) has N, so both coordinators can share one machine. Which socket holds
+it (:func:`holding_sockets`) tells whose claim it is: the port lies in Linux's default
+ephemeral range, so anything may hold it for a while.
 """
 
 from __future__ import annotations
@@ -36,3 +38,63 @@ def port_is_taken(domain_id: int) -> bool:
         return True
     sock.close()
     return False
+
+
+#: sock_diag's numbers (linux/sock_diag.h, inet_diag.h, tcp_states.h): a dump of TCP
+#: sockets listening (10) or bound and idle (13, TCP_BOUND_INACTIVE, Linux 6.8 and later).
+_NETLINK_SOCK_DIAG = 4
+_SOCK_DIAG_BY_FAMILY = 20
+_DUMP_REQUEST = 0x301  # NLM_F_REQUEST | NLM_F_DUMP
+_NLMSG_ERROR, _NLMSG_DONE = 2, 3
+_STATES = 1 << 10 | 1 << 13
+_IPPROTO_TCP = 6
+
+
+def holding_sockets(domain_id: int) -> frozenset[int] | None:
+    """The inodes of the TCP sockets bound to 32768+ID (IPv4 and IPv6); None: cannot tell.
+
+    A socket bound without listen(), as upstream's and colcon's coordinators hold it, is
+    in no /proc/net/tcp table: only sock_diag's dump of bound-only sockets shows it, and
+    only from Linux 6.8 (older kernels show none: an empty set, no evidence of anyone).
+    """
+    import struct  # only here: not on every test's path
+
+    port = PORT_BASE + domain_id
+    found: set[int] = set()
+    try:
+        for family in (_socket.AF_INET, _socket.AF_INET6):
+            found.update(_dump(family, port))
+    except (OSError, struct.error):
+        return None
+    return frozenset(found)
+
+
+def _dump(family: int, port: int) -> list[int]:
+    """One family's dump, read to its end: the inodes of sockets on ``port``."""
+    import struct as _struct  # only here: not on every test's path
+
+    request = _struct.pack("=BBBBI", family, _IPPROTO_TCP, 0, 0, _STATES) + bytes(48)
+    header = _struct.pack("=IHHII", 16 + len(request), _SOCK_DIAG_BY_FAMILY, _DUMP_REQUEST, 1, 0)
+    inodes: list[int] = []
+    sock = _socket.socket(_socket.AF_NETLINK, _socket.SOCK_DGRAM, _NETLINK_SOCK_DIAG)
+    try:
+        sock.sendto(header + request, (0, 0))
+        while True:
+            data = sock.recv(65536)
+            offset = 0
+            while offset + 16 <= len(data):
+                length, kind = _struct.unpack_from("=IH", data, offset)
+                if kind == _NLMSG_DONE:
+                    return inodes
+                if kind == _NLMSG_ERROR or length < 16:
+                    raise OSError("sock_diag refused the dump")
+                # inet_diag_msg: family, state, timer, retrans, then the socket's ID
+                # (source port first, big-endian), ..., its inode at byte 68.
+                message = offset + 16
+                if _struct.unpack_from(">H", data, message + 4)[0] == port:
+                    inodes.append(_struct.unpack_from("=I", data, message + 68)[0])
+                offset += (length + 3) & ~3
+            if not data:
+                return inodes
+    finally:
+        sock.close()

@@ -14,6 +14,14 @@ up from a process, the first ancestor that did not start with the value is the o
 set it. It counts as a tool's only when that ancestor is one of these tools and the ID's
 port is held now (their lock, held while what they started lives).
 
+colcon sets values without the coordinator too (a package's environment hook,
+``set;ROS_DOMAIN_ID;5``), and port 32768+ID lies in Linux's ephemeral range (anything may
+hold it, our own runner holding that ID too). So colcon's counts only when colcon itself
+holds the port: a socket bound to it among colcon's own descriptors, which only the
+coordinator's extension, loaded in that colcon, makes (a Python module leaves no other
+mark in /proc). Where the kernel cannot show who holds a port (sock_diag's bound-only
+sockets: Linux 6.8 and later) or colcon's descriptors cannot be read, it is no tool's.
+
 A user's ``export ROS_DOMAIN_ID=5`` is never taken for a tool's: the shell that ran it is
 the first ancestor without the value, and a shell is no tool; ``ROS_DOMAIN_ID=5 colcon
 test`` gives colcon itself the value, which the coordinator then replaces (the user's
@@ -25,6 +33,7 @@ conftest, a pytest plugin) is not in its own /proc entry: nobody's but the user'
 from __future__ import annotations
 
 import itertools
+import os
 
 from ros_isolated_test.domain_coordinator import port_guard
 from ros_isolated_test.domain_coordinator.pool import HIGHEST_VALID_ID
@@ -169,6 +178,32 @@ def _tool(pid: int, block: bytes, value: str, own_value: str | None) -> Setter |
     domain_id = domain_value(value)
     if kind is None or domain_id is None or not 0 <= domain_id <= HIGHEST_VALID_ID:
         return None
-    if not port_guard.port_is_taken(domain_id):
+    if kind == COLCON:
+        if not holds_port(pid, domain_id):
+            return None  # a hook's or anyone's value: the coordinator holds what it sets
+    elif not port_guard.port_is_taken(domain_id):
         return None
     return Setter(kind, pid, proc.cmdline(pid), value, domain_id, own_value)
+
+
+def holds_port(pid: int, domain_id: int) -> bool:
+    """Whether process ``pid`` itself holds the ID's port (not a child, not another process).
+
+    One of its descriptors is a socket the kernel shows bound to 32768+ID.
+    """
+    holding = port_guard.holding_sockets(domain_id)
+    if not holding:
+        return False
+    wanted = {f"socket:[{inode}]" for inode in holding}
+    folder = f"/proc/{pid}/fd"
+    try:
+        descriptors = os.listdir(folder)
+    except OSError:
+        return False  # gone, or not ours to read
+    for descriptor in descriptors:
+        try:
+            if os.readlink(f"{folder}/{descriptor}") in wanted:
+                return True
+        except OSError:
+            continue  # closed meanwhile
+    return False

@@ -226,11 +226,13 @@ def decide(
     preset = [item for item in assignments if item.name == DOMAIN_VAR]
     if not disabled:
         if preset:
-            value = env[DOMAIN_VAR]
+            # Appends are applied last: the last of them, else the last set, is what counts.
+            item = ([given for given in preset if given.append] or preset)[-1]
+            origin = _origin(item, env_origin)
             raise RefusedError(
-                f"refusing to run: {DOMAIN_VAR}={value!r} is passed with {env_origin}, so the "
+                f"refusing to run: {DOMAIN_VAR}={item.value!r} is passed with {origin}, so the "
                 f"test would share that domain with whatever else runs in it; remove it from "
-                f"{env_origin} (the runner picks a free ID), or add {DISABLE_VAR}=1 to "
+                f"{origin} (the runner picks a free ID), or add {DISABLE_VAR}=1 to "
                 f"{env_origin} (or the runner's environment) to run without isolation"
             )
         replaced = _tool_domain(environ) if DOMAIN_VAR in environ else None
@@ -278,6 +280,16 @@ def decide(
             "without namespaces"
         )
     return Policy(isolate=False, env=env, notes=(*notes, *warnings), mode=mode, asked=asked)
+
+
+def _origin(item: EnvAssignment, env_origin: str) -> str:
+    """The option that passed ``item``, named in messages so the user edits that one.
+
+    ``--append-env`` (ament_add_test's APPEND_ENV) for an appended one.
+    """
+    if not item.append:
+        return env_origin
+    return env_origin.replace("--env", "--append-env").replace(" ENV)", " APPEND_ENV)")
 
 
 def _preset_refusal(value: str, where: str = "") -> str:
@@ -469,10 +481,12 @@ def _refuse_preset_partition(
     for variable in partition.VARIABLES:
         given = [item for item in assignments if item.name == variable]
         if given:
+            item = ([each for each in given if each.append] or given)[-1]
+            origin = _origin(item, env_origin)
             raise RefusedError(
-                f"refusing to run: {variable}={given[-1].value!r} is passed with {env_origin}, "
+                f"refusing to run: {variable}={item.value!r} is passed with {origin}, "
                 f"so the test's simulation would share that Gazebo transport partition with "
-                f"whatever else runs in it; remove it from {env_origin} ({fix})",
+                f"whatever else runs in it; remove it from {origin} ({fix})",
                 variable,
             )
     for variable in partition.VARIABLES:

@@ -11,12 +11,19 @@ runs, names colcon's IDs as colcon's and our runners as having replaced them. A
 ROS_DOMAIN_ID the user set is still refused under the same colcon. Control: the same
 packages built without the recipe run on colcon's IDs, one per package, and the talkers of
 one package hear each other.
+
+An ID a package's environment hook sets (``set;ROS_DOMAIN_ID;<id>`` in a dependency's
+``domain.dsv``) is colcon's doing but no coordinator's: refused, with the coordinator not
+installed whether or not another process holds 32768+ID (bound as our runner holds its
+ID, or listening), and with it installed too (it holds the ID it gave, not the hook's).
+Both packages are built with the others; each case is one cheap ``colcon test`` of one.
 """
 
 from __future__ import annotations
 
 import re
 import shutil
+import socket
 import subprocess
 import time
 from collections.abc import Mapping
@@ -55,7 +62,14 @@ PACKAGE_OF = {
 }
 CMAKE_TOKENS = sorted(token for token, package in PACKAGE_OF.items() if package != "zero_edit_py")
 RECIPE = "colcon build --cmake-args -DCMAKE_PROJECT_INCLUDE=$(ros-isolated-test cmake-include)"
-IN_PARALLEL = "colcon --log-level debug test --parallel-workers 3 --ctest-args -j3"
+#: A package whose environment hook sets ROS_DOMAIN_ID, and one whose test depends on it.
+HOOK, HOOKED = "domain_hook", "hooked_test"
+IN_PARALLEL = (
+    f"colcon --log-level debug test --packages-skip {HOOK} {HOOKED} --parallel-workers 3 "
+    "--ctest-args -j3"
+)
+#: colcon given no coordinator: nothing on PYTHONPATH (it is not installed anywhere else).
+NO_COORDINATOR = {"PYTHONPATH": ""}
 ALLOCATED = re.compile(r"Allocated ROS_DOMAIN_ID=(\d+) for '([^']+)'")
 #: The runner's first line when it replaced colcon's ID.
 REPLACING = re.compile(
@@ -97,6 +111,7 @@ class Workspace:
         talker = root / "src" / "crosstalk_demo" / "test"
         talker.mkdir(parents=True)
         shutil.copy(TOKEN_TALKER, talker)
+        _hook_packages(root / "src" / "hooked")
         ws = crosstalk_workspace()
         self.env: dict[str, str] = ws.colcon_env(ws.Toolchain(base_env=env))
         self.env["COLCON_HOME"] = str(root / "colcon-home")
@@ -123,6 +138,56 @@ class Workspace:
         """What the coordinator allocated for each package's task, from colcon's debug log."""
         text = (self.root / log_base / "latest_test" / "logger_all.log").read_text()
         return {Path(base).name: int(domain) for domain, base in ALLOCATED.findall(text)}
+
+
+_MANIFEST = """\
+<?xml version="1.0"?>
+<package format="3">
+  <name>{name}</name>
+  <version>0.1.0</version>
+  <description>{description}</description>
+  <maintainer email="maintainer@example.com">Example Maintainer</maintainer>
+  <license>Apache-2.0</license>
+  <buildtool_depend>ament_cmake</buildtool_depend>
+{depends}  <export><build_type>ament_cmake</build_type></export>
+</package>
+"""
+_LISTS = """\
+cmake_minimum_required(VERSION 3.15)
+project({name} NONE)
+find_package(ament_cmake REQUIRED)
+{body}
+ament_package()
+"""
+
+
+def _hook_packages(root: Path) -> None:
+    """:data:`HOOK` (its hook sets ROS_DOMAIN_ID, the value written by :func:`_set_hook`)
+    and :data:`HOOKED`, whose one test prints the ID it got; colcon applies a dependency's
+    hooks to a package's test task."""
+    hook = root / HOOK
+    (hook / "hooks").mkdir(parents=True)
+    _write_hook(hook / "hooks", 0)
+    (hook / "package.xml").write_text(
+        _MANIFEST.format(name=HOOK, description="Sets ROS_DOMAIN_ID by a hook.", depends="")
+    )
+    (hook / "CMakeLists.txt").write_text(
+        _LISTS.format(name=HOOK, body="ament_environment_hooks(hooks/domain.sh hooks/domain.dsv)")
+    )
+    hooked = root / HOOKED
+    hooked.mkdir(parents=True)
+    (hooked / "package.xml").write_text(
+        _MANIFEST.format(
+            name=HOOKED, description="One test.", depends=f"  <depend>{HOOK}</depend>\n"
+        )
+    )
+    body = (
+        "if(BUILD_TESTING)\n"
+        '  ament_add_test(hooked_id COMMAND sh -c "echo id=$ROS_DOMAIN_ID"\n'
+        "    GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n"
+        "endif()"
+    )
+    (hooked / "CMakeLists.txt").write_text(_LISTS.format(name=HOOKED, body=body))
 
 
 def _read_records(folder: Path) -> dict[str, Record]:
@@ -323,3 +388,79 @@ def test_without_the_recipe_tests_of_a_package_share_colcons_id_and_hear_each_ot
         for t, foreign in heard.items()
     }
     assert all(same_package.values()), heard
+
+
+# --- an ID a package's environment hook sets: colcon's doing, no coordinator's -------------
+
+
+def _write_hook(folder: Path, domain_id: int) -> None:
+    """The hook, as ament has it: a shell script (what colcon's ``sh`` sources for a
+    task) and its ``.dsv`` twin (what colcon's Python-side setup reads)."""
+    (folder / "domain.sh").write_text(f"export ROS_DOMAIN_ID={domain_id}\n")
+    (folder / "domain.dsv").write_text(f"set;ROS_DOMAIN_ID;{domain_id}\n")
+
+
+def _set_hook(workspace: Workspace, domain_id: int) -> None:
+    """The installed hook's value (read by colcon at each ``colcon test``)."""
+    _write_hook(workspace.root / "install" / HOOK / "share" / HOOK / "environment", domain_id)
+
+
+def _test_hooked(
+    workspace: Workspace, domain_id: int, holder: str, coordinator: bool
+) -> tuple[str, dict[str, int]]:
+    """``colcon test`` of :data:`HOOKED` alone, its hook's port held as ``holder`` says
+    (``none``; ``bound``, as our runner holds its ID; ``listening``): its output, and what
+    a coordinator allocated (its debug log; a log base of the run's own, as colcon names
+    a run's log folder by the second)."""
+    log_base = f"log-hooked-{holder}-{coordinator}"
+    _set_hook(workspace, domain_id)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        if holder != "none":
+            sock.bind(("", 32768 + domain_id))
+        if holder == "listening":
+            sock.listen()
+        output = workspace.shell(
+            f"colcon --log-base {log_base} --log-level debug test --packages-select {HOOKED}",
+            workspace.root / "records-hooked",
+            {} if coordinator else NO_COORDINATOR,
+        )
+    finally:
+        sock.close()
+    return output, workspace.allocated(log_base)
+
+
+def _refused(workspace: Workspace, domain_id: int, output: str) -> None:
+    """The hooked test's result: the hook's ID refused as any preset ID, nothing run."""
+    path = workspace.root / "build" / HOOKED / "test_results" / HOOKED / "hooked_id.xml"
+    result = load_result(path)
+    assert result.only.outcome == "failure", output[-3000:]
+    assert result.only.message.startswith(
+        f"refusing to run: ROS_DOMAIN_ID is already set to '{domain_id}', so the test would "
+        "share that domain"
+    ), result.only.message
+    assert result.properties["exit"] == "not run"
+    assert "ros_domain_id_replaced" not in result.properties
+
+
+@pytest.mark.parametrize("holder", ["none", "bound", "listening"])
+def test_a_hooks_id_is_refused_without_the_coordinator_whoever_holds_its_port(
+    workspace: Workspace, holder: str
+) -> None:
+    """No coordinator (none allocated anything), colcon set the hook's ID: refused, though
+    another process holds its port (once taken for colcon's coordinator's, then replaced)."""
+    (domain_id,) = free_ids(1)
+    output, allocated = _test_hooked(workspace, domain_id, holder, coordinator=False)
+    assert allocated == {}, allocated
+    _refused(workspace, domain_id, output)
+
+
+def test_a_hooks_id_is_refused_with_the_coordinator_which_holds_only_its_own(
+    workspace: Workspace,
+) -> None:
+    """The coordinator allocated another ID for the task (its own, which the other tests
+    see replaced); the hook's value won, and its port is held by another process: refused."""
+    (domain_id,) = free_ids(1)
+    output, allocated = _test_hooked(workspace, domain_id, "bound", coordinator=True)
+    assert HOOKED in allocated and allocated[HOOKED] != domain_id, (allocated, output[-3000:])
+    _refused(workspace, domain_id, output)

@@ -11,6 +11,11 @@ its talker really used); the control keeps upstream's runner and raw file, on no
 timeline. A second ``colcon test`` with ``ROS_DOMAIN_ID`` exported: ours refuses the taken
 test, as it refuses any; upstream's runs the control on that ID without a word.
 
+The taken package also registers three ``true`` tests that pin ROS_DOMAIN_ID (label
+``pinned``, left out of those runs): on upstream's runner with ENV and with APPEND_ENV, both
+kept there (named at configure time, run by upstream's runner), and on the default runner
+with APPEND_ENV, which ours refuses naming APPEND_ENV, the option to edit.
+
 Real launch_testing (the outside tier's vendored Jazzy sources, in the launch environment
 of helpers/launch_env.py), real colcon and ctest; one workspace build for the module.
 """
@@ -50,16 +55,26 @@ if(BUILD_TESTING)
   find_package(launch_testing_ament_cmake REQUIRED)
   add_launch_test(test/test_tokens_launch.py TARGET {target}
     RUNNER "${{ament_cmake_ros_DIR}}/run_test_isolated.py"
-    ENV LAUNCH_CASES_TOKEN={token} TIMEOUT 120)
+    ENV LAUNCH_CASES_TOKEN={token} TIMEOUT 120){pinned}
 endif()
 
 ament_package()
 """
+#: The taken package's tests that pin ROS_DOMAIN_ID: {id} is the pinned ID.
+PINNED = """
+  set(_upstream "${{ament_cmake_ros_DIR}}/run_test_isolated.py")
+  ament_add_test(pinned_env COMMAND true RUNNER "${{_upstream}}" ENV ROS_DOMAIN_ID={id}
+    GENERATE_RESULT_FOR_RETURN_CODE_ZERO)
+  ament_add_test(pinned_append COMMAND true RUNNER "${{_upstream}}"
+    APPEND_ENV ROS_DOMAIN_ID={id} GENERATE_RESULT_FOR_RETURN_CODE_ZERO)
+  ament_add_test(appended COMMAND true APPEND_ENV ROS_DOMAIN_ID={id}
+    GENERATE_RESULT_FOR_RETURN_CODE_ZERO)
+  set_tests_properties(pinned_env pinned_append appended PROPERTIES LABELS pinned)"""
 _RUNNING = re.compile(r"^Running with ROS_DOMAIN_ID (\d+)\b", re.MULTILINE)
 
 
-def _package(root: Path, name: str, token: str) -> None:
-    lists = CMAKE_LISTS.format(name=name, target=TARGET, token=token)
+def _package(root: Path, name: str, token: str, pinned: str = "") -> None:
+    lists = CMAKE_LISTS.format(name=name, target=TARGET, token=token, pinned=pinned)
     depends = ("ament_cmake_ros", "launch_testing_ament_cmake", "rclpy")
     launch_files.cmake_package(root, name, lists, token, depends)
 
@@ -70,6 +85,7 @@ class Workspace:
     env: dict[str, str]
     colcon: list[str]  # the launch environment's colcon with this workspace's log base
     build_output: str
+    pinned: int  # the ID the taken package's pinned tests set
 
     @property
     def paths(self) -> list[str]:
@@ -90,8 +106,9 @@ class Workspace:
         return (self.root / "log" / "latest_build" / PACKAGES[token] / "stdout.log").read_text()
 
     def test(self, **extra_env: str) -> Run:
-        """``colcon test`` of both packages at once."""
-        argv = [*self.colcon, "test", *self.paths, "--parallel-workers", "2"]
+        """``colcon test`` of both packages at once (the pinned tests left out)."""
+        argv = [*self.colcon, "test", *self.paths, "--parallel-workers", "2",
+                "--ctest-args", "-LE", "pinned"]  # fmt: skip
         junit = {token: self.result(token) for token in PACKAGES}
         return run_launches(self.root, {**self.env, **extra_env}, argv, junit, self.root)
 
@@ -101,8 +118,9 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
     """Both packages, built once with the recipe; the control opted out by colcon.meta."""
     python = launch_runs.launch_python()
     root = tmp_path_factory.mktemp("upstream-runner")
+    (pinned,) = free_ids(1)
     for token, name in PACKAGES.items():
-        _package(root / "src", name, token)
+        _package(root / "src", name, token, PINNED.format(id=pinned) if token == TAKEN else "")
     meta = {"names": {PACKAGES[KEPT]: {"cmake-args": ["-DROS_ISOLATED_TEST_ALL=OFF"]}}}
     (root / "colcon.meta").write_text(json.dumps(meta))
     env = launch_environment(python, root, pool=4)
@@ -112,14 +130,14 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Workspace:
         text=True, check=True,
     ).stdout.strip()  # fmt: skip
     colcon = [str(bin_dir / "colcon"), "--log-base", str(root / "log")]
-    ws = Workspace(root, env, colcon, "")
+    ws = Workspace(root, env, colcon, "", pinned)
     build = subprocess.run(
         [*colcon, "build", *ws.paths, "--cmake-args", f"-DCMAKE_PROJECT_INCLUDE={include}",
          f"-DPython3_EXECUTABLE={python}"],
         cwd=root, env=env, capture_output=True, text=True, timeout=COLCON_HUNG, check=False,
     )  # fmt: skip
     assert build.returncode == 0, f"colcon build failed:\n{build.stdout}{build.stderr}"
-    return Workspace(root, env, colcon, build.stdout + build.stderr)
+    return Workspace(root, env, colcon, build.stdout + build.stderr, pinned)
 
 
 @pytest.fixture(scope="module")
@@ -144,7 +162,7 @@ def test_configuring_counts_the_test_taken_over(workspace: Workspace, runner_scr
     said = workspace.build_log(TAKEN)
     assert re.search(
         rf"^-- ros_isolated_test: tests of {PACKAGES[TAKEN]} are isolated, .* run by \S+ "
-        r"\(CMAKE_PROJECT_INCLUDE; .*\): 1 test, 1 of them taken over from upstream's "
+        r"\(CMAKE_PROJECT_INCLUDE; .*\): 2 tests, 1 of them taken over from upstream's "
         r"run_test_isolated\.py$",
         said,
         re.MULTILINE,
@@ -208,3 +226,49 @@ def test_a_preset_id_is_refused_as_ours_refuses_it_while_upstream_uses_it(
     assert TAKEN not in run.records, "the refused test ran its talker"
     # The control, on upstream's runner, ran on the preset ID without a word.
     assert run.records[KEPT].domain_id == str(preset), run.records[KEPT]
+
+
+@pytest.fixture(scope="module")
+def pinned_run(workspace: Workspace, preset_run: tuple[Run, int]) -> str:
+    """After the other runs: ``colcon test`` of the taken package's pinned tests alone."""
+    done = subprocess.run(
+        [*workspace.colcon, "test", *workspace.paths, "--packages-select", PACKAGES[TAKEN],
+         "--ctest-args", "-L", "pinned"],
+        cwd=workspace.root, env=workspace.env, capture_output=True, text=True,
+        timeout=COLCON_HUNG, check=False,
+    )  # fmt: skip
+    return done.stdout + done.stderr
+
+
+def test_upstreams_runner_pinned_by_env_or_append_env_is_kept_alike(
+    workspace: Workspace, pinned_run: str
+) -> None:
+    """Both keep upstream's runner, each named at configure time with the keyword that
+    pinned the ID, and upstream's runner ran both (its result file, none of ours); the
+    control, registered beside them: APPEND_ENV on the default runner is ours."""
+    name = PACKAGES[TAKEN]
+    runners = runners_of(workspace.root / "build" / name / "CTestTestfile.cmake")
+    upstream = runners["pinned_env"]
+    assert upstream.endswith("/share/ament_cmake_ros/cmake/run_test_isolated.py"), runners
+    assert runners["pinned_append"] == upstream, runners
+    assert runners["appended"].endswith("/ros_isolated_test/runner/ament/run_test_isolated.py")
+    said = workspace.build_log(TAKEN)
+    (left_out,) = re.findall(r"ros_isolated_test: NOT isolated, .*$", said, re.MULTILINE)
+    for test, keyword in (("pinned_env", "ENV"), ("pinned_append", "APPEND_ENV")):
+        assert (
+            f"{test} (upstream's run_test_isolated.py, kept: its {keyword} sets ROS_DOMAIN_ID)"
+        ) in left_out, left_out
+        result = workspace.root / "build" / name / "test_results" / name / f"{test}.xml"
+        assert "ros_domain_id" not in result.read_text(), pinned_run[-3000:]
+
+
+def test_an_id_appended_on_our_runner_is_refused_naming_append_env(
+    workspace: Workspace, pinned_run: str
+) -> None:
+    name = PACKAGES[TAKEN]
+    case = load_result(workspace.root / "build" / name / "test_results" / name / "appended.xml")
+    assert case.only.outcome == "failure", pinned_run[-3000:]
+    assert case.only.message.startswith(
+        f"refusing to run: ROS_DOMAIN_ID='{workspace.pinned}' is passed with --append-env "
+        "(ament_add_test APPEND_ENV), so the test would share that domain"
+    ), case.only.message

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import socket
 import sys
 from pathlib import Path
@@ -37,7 +38,12 @@ from ros_isolated_test.domain_coordinator import (
     DomainUse,
     domain_uses,
 )
-from ros_isolated_test.domain_coordinator.port_guard import PORT_BASE, claim_port, port_is_taken
+from ros_isolated_test.domain_coordinator.port_guard import (
+    PORT_BASE,
+    claim_port,
+    holding_sockets,
+    port_is_taken,
+)
 
 #: Says it runs (its exec done: descriptors closed on exec are closed by then), then keeps
 #: running until its stdin closes, with every descriptor it was given.
@@ -86,6 +92,28 @@ def test_a_port_another_socket_holds_bound_and_idle_cannot_be_claimed() -> None:
     sock = claim_port(domain_id)  # the control: the same port, let go
     assert sock is not None
     sock.close()
+
+
+@pytest.mark.parametrize("family", [socket.AF_INET, socket.AF_INET6], ids=["ipv4", "ipv6"])
+@pytest.mark.parametrize("listening", [False, True], ids=["bound", "listening"])
+def test_the_sockets_holding_a_port_are_named_bound_or_listening(
+    family: socket.AddressFamily, listening: bool
+) -> None:
+    """The socket's own inode, as /proc/<pid>/fd shows it, whether it listens or, as the
+    coordinators' do, is only bound (in no /proc/net/tcp table). The control: the same
+    port let go holds nothing; another ID's port is not named."""
+    domain_id, other_id = free_ids(2)
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.bind(("::" if family == socket.AF_INET6 else "", PORT_BASE + domain_id))
+        if listening:
+            sock.listen()
+        inode = int(os.readlink(f"/proc/self/fd/{sock.fileno()}")[len("socket:[") : -1])
+        assert holding_sockets(domain_id) == frozenset({inode})
+        assert holding_sockets(other_id) == frozenset()
+    finally:
+        sock.close()
+    assert holding_sockets(domain_id) == frozenset()
 
 
 def test_a_child_started_while_the_port_is_claimed_does_not_keep_it(

@@ -26,6 +26,7 @@ from helpers.commands import HUNG, ament_args, run_cli, start_cli
 from helpers.coordinator import (
     UPSTREAM_SCRIPT,
     WAIT_SCRIPT,
+    stand_in_colcon,
     status_rows,
     wait_for_environment,
     without_domain_id,
@@ -302,3 +303,43 @@ def test_a_test_of_upstreams_runner_is_upstreams_not_a_squatter(
         (str(other_id), "port"),
         (str(other_id), "squatter"),
     ], table
+
+
+def test_colcon_is_named_only_for_an_id_whose_port_colcon_itself_holds(
+    lock_dir: Path, children: Children, tmp_path: Path
+) -> None:
+    """Two colcon stand-ins, each having set an ID for its task: the one holding the port
+    itself (as its coordinator does) is named colcon's; the other, whose ID's port another
+    process holds (an environment hook's ID, a runner of ours on it), is not: the port
+    is listed as taken and its task as a squatter."""
+    coordinated, hooked = free_ids(2)
+    colcon = stand_in_colcon(tmp_path)
+    env = without_domain_id()
+    env.pop("COLCON_EXTENSION_BLOCKLIST", None)
+    tasks: dict[int, tuple[int, int]] = {}  # ID -> (colcon, its task)
+    for domain_id, hold in ((coordinated, "hold"), (hooked, "free")):
+        argv = [sys.executable, str(colcon), str(domain_id), hold, "sh", "-c", WAIT_SCRIPT]
+        process = children.start(argv, env=env)
+        pid = int(children.first_line(process).split()[0].removeprefix("pid="))
+        wait_for_environment(pid, domain_id)
+        tasks[domain_id] = (process.pid, pid)
+    port = claim_port(hooked)
+    assert port is not None
+    try:
+        uses = domain_uses(lock_dir, (coordinated, hooked))
+    finally:
+        port.close()
+    ours = {pid for pair in tasks.values() for pid in pair}
+    named = [
+        (use.domain_id, use.via, use.holder.pid if use.holder else None)
+        for use in uses
+        if use.holder is None or use.holder.pid in ours
+    ]
+    assert sorted(named, key=str) == sorted(
+        [
+            (coordinated, "colcon", tasks[coordinated][0]),
+            (hooked, "port", None),
+            (hooked, "environment", tasks[hooked][1]),
+        ],
+        key=str,
+    )

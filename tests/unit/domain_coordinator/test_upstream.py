@@ -2,16 +2,17 @@
 
 A process's ROS_DOMAIN_ID is a tool's when the first ancestor that did not start with it
 is colcon (its domain-ID coordinator), upstream's run_test_isolated.py or Kilted's
-rmw_test_fixture, and that ID's port is held. Real upstream runner and fixture; colcon
-by a stand-in named as colcon is (the real one: tests/e2e/test_colcon_coordinator.py).
-Every positive case has its negative beside it: a shell's export with the port held by
-someone, a value set inside the process that asks, colcon with the coordinator blocked or
-not holding the port.
+rmw_test_fixture, and that ID's port is held (colcon's: by colcon itself). Real upstream
+runner and fixture; colcon by a stand-in named as colcon is (the real one:
+tests/e2e/test_colcon_coordinator.py). Every positive case has its negative beside it: a
+shell's export with the port held by someone, a value set inside the process that asks,
+colcon with the coordinator blocked, or not holding the port while another process does.
 """
 
 from __future__ import annotations
 
 import os
+import socket
 import sys
 from pathlib import Path
 
@@ -88,6 +89,31 @@ def test_colcon_without_the_coordinator_holding_the_port_sets_nobodys_id(
     domain_id = free_ids(1)[0]
     pid, _ = _colcon_child(children, tmp_path, domain_id, hold="free")
     assert upstream.setter_of(pid) is None
+
+
+@pytest.mark.parametrize("holder", ["bound", "listening"])
+def test_colcon_not_holding_the_port_sets_nobodys_id_whoever_else_holds_it(
+    children: Children, tmp_path: Path, holder: str
+) -> None:
+    """colcon set it (an environment hook's value) and another process holds 32768+ID (our
+    runner's idle claim, a listener): not colcon's coordinator's, whose socket is colcon's
+    own. The control: the same colcon holding it itself is the coordinator's."""
+    domain_id = free_ids(1)[0]
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        sock.bind(("", port_guard.PORT_BASE + domain_id))
+        if holder == "listening":
+            sock.listen()
+        pid, _ = _colcon_child(children, tmp_path, domain_id, hold="free")
+        assert port_guard.port_is_taken(domain_id)
+        assert upstream.setter_of(pid) is None
+        assert not upstream.holds_port(children.processes[-1].pid, domain_id)
+        assert upstream.holds_port(os.getpid(), domain_id)
+    finally:
+        sock.close()
+    pid, colcon = _colcon_child(children, tmp_path, domain_id)
+    setter = upstream.setter_of(pid)
+    assert setter is not None and (setter.kind, setter.pid) == (upstream.COLCON, colcon)
 
 
 def test_colcon_with_the_coordinator_blocked_sets_nobodys_id(

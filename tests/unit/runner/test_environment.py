@@ -37,6 +37,7 @@ from helpers.domains import free_ids
 from helpers.results import load_result
 
 from ros_isolated_test.domain_coordinator.pool import POOL_ENV
+from ros_isolated_test.domain_coordinator.port_guard import claim_port
 from ros_isolated_test.runner import environment, settings
 from ros_isolated_test.runner.environment import DOMAIN_VAR, HELD_VAR, RefusedError
 from ros_isolated_test.runner.request import EnvAssignment
@@ -86,6 +87,26 @@ def test_an_id_colcons_coordinator_holds_is_replaced_by_one_of_the_pool(
     control = _under_colcon(mode, runner_script, env, tmp_path, colcon_id, "free")
     assert control.returncode == 2, control.stdout + control.stderr
     assert f"ROS_DOMAIN_ID is already set to '{colcon_id}', so" in the_error_line(control)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_an_id_colcon_set_while_another_process_holds_its_port_is_refused(
+    runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
+) -> None:
+    """An environment hook's ID that colcon set, its port 32768+ID held by someone else
+    (here as our runner holds its own ID): no coordinator's, refused as any preset ID.
+    The control: the same colcon holding the port itself is replaced (the test above)."""
+    colcon_id, other = free_ids(2)
+    env[POOL_ENV] = str(other)
+    held = claim_port(colcon_id)
+    assert held is not None
+    try:
+        proc = _under_colcon(mode, runner_script, env, tmp_path, colcon_id, "free")
+    finally:
+        held.close()
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "id=" not in proc.stdout
+    assert f"ROS_DOMAIN_ID is already set to '{colcon_id}', so" in the_error_line(proc)
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -169,9 +190,10 @@ def test_domain_id_passed_with_env_option_is_refused(
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert not (tmp_path / "ran").exists()
     line = the_error_line(proc)
-    assert "ROS_DOMAIN_ID='7'" in line
-    assert "--env" in line
-    assert "DISABLE_ROS_ISOLATION=1" in line
+    keyword = "APPEND_ENV" if option == "--append-env" else "ENV"
+    assert f"ROS_DOMAIN_ID='7' is passed with {option} (ament_add_test {keyword}), so" in line
+    assert f"remove it from {option} (ament_add_test {keyword}) (the runner picks" in line
+    assert "add DISABLE_ROS_ISOLATION=1 to --env (ament_add_test ENV)" in line
     case = load_result(result).only
     assert case.outcome == "failure"
     assert case.message == line.removeprefix(ERROR_PREFIX)

@@ -62,8 +62,9 @@ def test_a_partition_passed_with_env_is_refused(variable: str, append: bool) -> 
     given = [EnvAssignment(variable, "sim", append=append)]
     with pytest.raises(environment.RefusedError) as refused:
         _decide({}, given)
-    assert f"{variable}='sim' is passed with --env" in str(refused.value)
-    assert "remove it from --env" in str(refused.value)
+    option = "--append-env" if append else "--env"  # the option to edit, named
+    assert f"{variable}='sim' is passed with {option}, so" in str(refused.value)
+    assert f"remove it from {option} (" in str(refused.value)
 
 
 def test_disable_ros_isolation_keeps_the_users_partitions() -> None:
