@@ -29,10 +29,34 @@ import signal
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
-    from typing import NoReturn
+    from typing import NoReturn, Protocol
 
     #: A signal mask, as pthread_sigmask gives it.
     Mask = set[int | signal.Signals]
+
+    class Spawner(Protocol):
+        """How a test is started tethered to its runner: :func:`start`, ``namespace.spawn``.
+
+        One contract, so ``spawn`` may pick either: like posix_spawn as the supervisor
+        calls it, ``output_fd`` becomes stdout and stderr, ``defaults`` get their default
+        action, each of ``candidates`` is tried in turn (as execvp would), and an exec
+        error is raised as that OSError, named ``name``; the signals the runner passes on
+        (:data:`HELD_BACK`) wait in the child until it execs, then act as they would on
+        the test. Returns the test's PID, the runner's child; the test gets
+        :data:`PARENT_DEATH_SIGNAL` when the runner dies. Only typed (no typing import on
+        a test's path).
+        """
+
+        def __call__(
+            self,
+            name: str,
+            candidates: Sequence[str],
+            argv: Sequence[str],
+            env: Mapping[str, str],
+            output_fd: int,
+            defaults: Iterable[int],
+        ) -> int: ...
+
 
 _PR_SET_PDEATHSIG = 1
 #: What the test gets when its runner dies: no handler can keep it alive, as ctest's
@@ -125,6 +149,17 @@ class Exec:
         raise kept or last or FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT))
 
 
+def plan_for(
+    candidates: Sequence[str],
+    argv: Sequence[str],
+    env: Mapping[str, str],
+    output_fd: int,
+    defaults: Iterable[int],
+) -> Exec:
+    """The child's exec for a :class:`Spawner`'s arguments: :data:`HELD_BACK` at default too."""
+    return Exec(candidates, argv, env, output_fd, (*defaults, *HELD_BACK))
+
+
 def report(fd: int, error: BaseException) -> None:
     """A failed step, as the child tells it: ``<step> <errno>``."""
     step = getattr(error, "step", "exec")
@@ -176,13 +211,8 @@ def start(
     output_fd: int,
     defaults: Iterable[int],
 ) -> int:
-    """Start the test tethered to this process; its PID.
-
-    Like posix_spawn as the supervisor calls it: ``output_fd`` becomes stdout and
-    stderr, ``defaults`` get their default action, each of ``candidates`` is tried in
-    turn, and an exec error is raised as that OSError, named ``name``.
-    """
-    plan = Exec(candidates, argv, env, output_fd, (*defaults, *HELD_BACK))
+    """Start the test tethered to this process: the plain :class:`Spawner`."""
+    plan = plan_for(candidates, argv, env, output_fd, defaults)
     report_r, report_w = os.pipe()  # close-on-exec: an exec that works closes it
 
     def child(mask: Mask) -> NoReturn:
@@ -213,4 +243,7 @@ def start(
     raise OSError(number, os.strerror(number), name)
 
 
-__all__ = ["HELD_BACK", "PARENT_DEATH_SIGNAL", "Exec", "fork", "start", "threads"]
+if TYPE_CHECKING:
+    _START: Spawner = start  # checked against the one contract
+
+__all__ = ["HELD_BACK", "PARENT_DEATH_SIGNAL", "Exec", "fork", "plan_for", "start", "threads"]

@@ -38,6 +38,7 @@ from ros_isolated_test.process.fork_exec import (
     HELD_BACK,
     Exec,
     fork,
+    plan_for,
     read_all,
     reap,
     report,
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Mapping, Sequence
     from typing import NoReturn
 
-    from ros_isolated_test.process.fork_exec import Mask
+    from ros_isolated_test.process.fork_exec import Mask, Spawner
 
 CLONE_NEWNS = 0x00020000
 CLONE_NEWIPC = 0x08000000
@@ -277,16 +278,12 @@ def spawn(
     output_fd: int,
     defaults: Iterable[int],
 ) -> int:
-    """Start the test in namespaces of its own; its PID.
+    """Start the test in namespaces of its own: the ``fork_exec.Spawner`` of namespace mode.
 
-    Like posix_spawn as the supervisor calls it: ``output_fd`` becomes stdout and
-    stderr, ``defaults`` get their default action, each of ``candidates`` is tried in
-    turn, and an exec error is raised as that OSError, named ``name``. The signals the
-    runner passes on (:data:`HELD_BACK`) wait in the child until it execs, then act as
-    they would on the test. Raises :class:`NamespaceError` when a step of the set-up fails.
+    Raises :class:`NamespaceError` when a step of the set-up fails.
     """
     lib = _libc()
-    plan = Exec(candidates, argv, env, output_fd, (*defaults, *HELD_BACK))
+    plan = plan_for(candidates, argv, env, output_fd, defaults)
     pid, report_r, go_w = _fork(lib, os.path.isdir(SHM), plan)
     said = _hand_over(pid, report_r, go_w)
     if not said:
@@ -381,6 +378,10 @@ def enter_here() -> None:
             os.close(ready_w)
         os.close(done_r)
         reap(helper)
+
+
+if TYPE_CHECKING:
+    _SPAWN: Spawner = spawn  # checked against the one contract
 
 
 #: CAP_SETGID's bit in a capability set: what maps supplementary groups (:func:`write_maps`).

@@ -17,6 +17,10 @@ from collections.abc import Iterator, Mapping, Sequence
 
 from ros_isolated_test.process import fork_exec
 
+TYPE_CHECKING = False  # no typing import on a test's path
+if TYPE_CHECKING:
+    from ros_isolated_test.process.fork_exec import Spawner
+
 #: The exit code a test gets when its status was reaped by someone else: a failure.
 STATUS_LOST = 255
 #: Reset to their default in the test: Python ignores SIGPIPE, and so would the test.
@@ -92,7 +96,7 @@ def _spawn(
     the runner (``fork_exec``: it dies when the runner dies), which posix_spawn cannot
     do; only a runner that runs threads uses posix_spawn. With ``namespaces`` the test
     starts in namespaces of its own (``namespace.spawn``), with the same descriptors and
-    signals.
+    signals: both are a ``fork_exec.Spawner``, one contract.
     """
     name = command[0]
     if os.sep in name:
@@ -102,12 +106,15 @@ def _spawn(
         candidates = [
             path for folder in folders if os.path.exists(path := os.path.join(folder, name))
         ]
+    tethered: Spawner | None = None
     if namespaces:
         from ros_isolated_test.process import namespace
 
-        return namespace.spawn(name, candidates, command, env, output_fd, _DEFAULT_IN_TEST)
-    if fork_exec.threads() == 1:
-        return fork_exec.start(name, candidates, command, env, output_fd, _DEFAULT_IN_TEST)
+        tethered = namespace.spawn
+    elif fork_exec.threads() == 1:
+        tethered = fork_exec.start
+    if tethered is not None:
+        return tethered(name, candidates, command, env, output_fd, _DEFAULT_IN_TEST)
     # Other threads run (a program embedding the runner): a fork could deadlock the child.
     kept: OSError | None = None
     last: OSError | None = None

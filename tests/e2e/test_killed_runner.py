@@ -10,6 +10,8 @@ user meets them: ``run`` started with setsid and its whole group SIGKILLed; the 
 under real ``colcon test`` of an ament_cmake package built with the zero-edit include,
 with an ``ament_add_test(... TIMEOUT 5)``; and the runner alone SIGKILLed, its test told
 to write its pass afterwards. The control: the same test, not killed, passes each way.
+And what holds for the test's own child when the runner is killed alone: it lives on,
+and its ID stays blocked until it has ended (docs/faults.md says where each part holds).
 Every wait is for an event (the file the test writes, the orphan's exit), never a clock.
 """
 
@@ -24,7 +26,7 @@ from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.commands import CLI, run_cli, start_process
+from helpers.commands import CLI, HUNG, MODES, ament_args, run_cli, start_process, start_runner
 from helpers.domains import free_ids
 from helpers.orphans import wait_ended, watch
 from helpers.processes import DEADLINE, poll_until, wait_for
@@ -228,3 +230,81 @@ def test_colcon_test_timeout_after_the_test_wrote_a_pass_fails_and_its_control_p
     assert (states / "hangs" / "wrote").exists(), "the test never wrote its pass"
     _fails(results / "hangs.xml", env)
     _passes(results / "exits.xml", env)
+
+
+# --- the test's own child, when its runner is killed alone --------------------------------
+
+#: The test (argv: a state folder): starts a child that ignores SIGTERM and SIGHUP (it says
+#: its PID, then execs a long sleep that keeps both ignored) and waits until ``done``.
+STUBBORN_CHILD = """#!/bin/sh
+sh -c 'trap "" TERM HUP; echo $$ > "$0/child.new"; mv "$0/child.new" "$0/child"; \
+exec sleep 3600' "$1" &
+while [ ! -e "$1/done" ]; do sleep 0.05; done
+exit 0
+"""
+
+
+def _stubborn(folder: Path) -> list[str]:
+    script = folder / "stubborn_child.sh"
+    script.write_text(STUBBORN_CHILD)
+    script.chmod(0o755)
+    state = folder / "state"
+    state.mkdir()
+    return [str(script), str(state)]
+
+
+def _rows_of(domain_id: int, env: Mapping[str, str]) -> dict[int, str]:
+    """``status --json``'s rows for ``domain_id``: how each PID holds it."""
+    rows = json.loads(run_cli(["status", "--json"], env).stdout)
+    return {row["pid"]: row["via"] for row in rows if row["domain_id"] == domain_id}
+
+
+@pytest.mark.parametrize("killed", ["killed alone", "control: not killed"])
+@pytest.mark.parametrize("mode", MODES)
+def test_the_own_child_of_a_test_whose_runner_is_killed_alone_holds_its_id_till_it_ends(
+    mode: str,
+    killed: str,
+    env: dict[str, str],
+    runner_script: str,
+    tmp_path: Path,
+    started: list[subprocess.Popen[bytes]],
+) -> None:
+    """What holds where (docs/faults.md): the runner SIGKILLed alone takes its test with it
+    (``PR_SET_PDEATHSIG``), but not the test's own child, which lives on under the next
+    subreaper; its ID stays blocked while it lives (``status``: a squatter, then a survivor
+    once a reservation has looked) and is free once it has ended. The control: a runner not
+    killed sweeps the same child (SIGTERM ignored, then SIGKILL) before it releases the ID.
+    """
+    (domain_id,) = free_ids(1)
+    env["ROS_ISOLATED_TEST_DOMAINS"] = str(domain_id)
+    command = _stubborn(tmp_path)
+    state = Path(command[1])
+    result, log = tmp_path / "pkg" / "t.xml", tmp_path / "runner.log"
+    if mode == "shell":
+        runner = start_process([CLI, "run", "--kill-grace", "0.2", "--junit-xml", str(result),
+                                "--", *command], env, log, started)  # fmt: skip
+    else:
+        # The sweep's grace is the RUNNER's default, 5 s.
+        args = ament_args(result, command, "--generate-result-on-success")
+        runner = start_runner(runner_script, args, env, log, started)
+    wait_for(state / "child")
+    child = int((state / "child").read_text())
+    pidfd = watch(child)
+    try_id = ["run", "--wait-timeout", "0", "--", "true"]
+    if killed == "killed alone":
+        runner.kill()
+        assert runner.wait(timeout=DEADLINE) == -signal.SIGKILL, log.read_text()
+        os.kill(child, 0)  # the test's own child lives on, TERM and HUP ignored
+        assert _rows_of(domain_id, env).get(child) == "environment"  # a squatter
+        refused = run_cli(try_id, env)
+        assert refused.returncode == 3, refused.stdout + refused.stderr
+        assert _rows_of(domain_id, env).get(child) == "survivor"  # written down by that look
+        os.kill(child, signal.SIGKILL)  # what ends it: nothing of the runner's
+    else:
+        (state / "done").touch()
+        assert runner.wait(timeout=HUNG) == 0, log.read_text()
+        assert f"stopped process {child} (sleep)" in log.read_text()
+    wait_ended(pidfd, child, "the test's own child")
+    free = run_cli(["run", "--wait-timeout", str(HUNG), "--", "true"], env)
+    assert free.returncode == 0, free.stdout + free.stderr
+    assert f"ROS_DOMAIN_ID {domain_id} " in free.stdout, free.stdout
