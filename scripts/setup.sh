@@ -44,6 +44,14 @@ docker_engine || missing+=(docker.io)
 command -v debootstrap >/dev/null 2>&1 || missing+=(debootstrap)
 # Headless Chromium: the tests open `report --html`'s page as a person would.
 command -v chromium >/dev/null 2>&1 || missing+=(chromium)
+# The Debian package (scripts/package_deb.sh): Debian's build tools, and the Python packages
+# its dh_auto_test runs the built package with (Debian's python3, not a venv).
+deb_tools=(debhelper dh-python python3-all python3-setuptools fakeroot python3-click python3-filelock python3-lxml)
+deb_build() {
+  command -v dpkg-buildpackage >/dev/null 2>&1 && command -v dh_python3 >/dev/null 2>&1 &&
+    command -v fakeroot >/dev/null 2>&1 && /usr/bin/python3 -c 'import click, filelock, lxml' >/dev/null 2>&1
+}
+deb_build || missing+=(debhelper)
 if ((${#missing[@]})); then
   echo "setup: installing system packages for: ${missing[*]}"
   sudo=""
@@ -55,6 +63,7 @@ if ((${#missing[@]})); then
   docker_engine || packages+=(docker.io)
   command -v debootstrap >/dev/null 2>&1 || packages+=(debootstrap)
   command -v chromium >/dev/null 2>&1 || packages+=(chromium)
+  deb_build || packages+=("${deb_tools[@]}")
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${packages[@]}" >/dev/null
 fi
 

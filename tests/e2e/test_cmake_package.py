@@ -38,6 +38,8 @@ from helpers.domains import free_ids
 from helpers.results import load_result
 from lxml import etree
 
+import ros_isolated_test
+
 pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
 
 TOKEN_TESTS = [f"token_talker_{i}" for i in range(1, 7)]
@@ -339,7 +341,7 @@ def test_pip_installs_every_cmake_file_beside_the_command() -> None:
     shipped = config["tool"]["setuptools"]["data-files"]["share/ros_isolated_test/cmake"]
     on_disk = sorted(str(p.relative_to(REPO)) for p in CMAKE_FILES.glob("*.cmake"))
     assert sorted(shipped) == on_disk
-    version = config["project"]["version"]
+    version = ros_isolated_test.__version__  # pyproject.toml reads it from there
     text = (CMAKE_FILES / "ros_isolated_testConfigVersion.cmake").read_text()
     assert f'set(PACKAGE_VERSION "{version}")' in text
 

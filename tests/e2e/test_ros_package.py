@@ -13,7 +13,6 @@ other.
 
 from __future__ import annotations
 
-import importlib
 import json
 import re
 import shutil
@@ -35,6 +34,8 @@ from helpers.ros_package import (
     run,
     ubuntu_versions,
 )
+
+import ros_isolated_test
 
 pytestmark = [
     pytest.mark.ros,
@@ -214,8 +215,7 @@ def test_sourced_the_command_the_plugin_and_the_cmake_package_are_found(
     workspace: Workspace, tmp_path: Path
 ) -> None:
     assert workspace.build.returncode == 0, workspace.build.stdout
-    tomllib = importlib.import_module("tomllib")  # 3.11+, as the ROS 2 Jazzy wheels are
-    version = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
+    version = ros_isolated_test.__version__  # pyproject.toml reads it from there
     command = in_workspace(
         workspace.root, ["sh", "-c", "command -v ros-isolated-test"], workspace.env
     )

@@ -412,6 +412,36 @@ def _seccomp() -> str | None:
     return None
 
 
+def _release_tools() -> str | None:
+    """python -m build and twine, beside this interpreter (the dev extra)."""
+    for name in ("build", "twine"):
+        if (missing := _module(name)()) is not None:
+            return missing
+    return None
+
+
+def _deb_build() -> str | None:
+    """What scripts/package_deb.sh runs: bloom and rosdep from .venv, Debian's build tools."""
+    here = Path(sys.executable).parent
+    tools = [tool for tool in ("bloom-generate", "rosdep") if not (here / tool).is_file()]
+    if tools:
+        names = " and ".join(tools)
+        return f"needs {names} beside {sys.executable} (scripts/setup.sh installs them)"
+    tools = [t for t in ("dpkg-buildpackage", "dh_python3", "fakeroot") if shutil.which(t) is None]
+    if tools:
+        return (
+            f"needs {', '.join(tools)} (apt install debhelper dh-python fakeroot; "
+            "scripts/setup.sh does)"
+        )
+    probe = "import click, filelock, lxml"
+    if _run_ok(["/usr/bin/python3", "-c", probe]) is not None:
+        return (
+            "the Debian build tests the package with Debian's python3, which needs "
+            "python3-click, python3-filelock and python3-lxml (scripts/setup.sh installs them)"
+        )
+    return None
+
+
 ROOT = Capability("root", _root)
 UNSHARE = Capability("unshare", _unshare)
 MOUNT_NAMESPACE = Capability("mount-namespace", _mount_namespace)
@@ -456,3 +486,7 @@ DOCKER_ENGINE = Capability("docker-engine", _docker_engine)
 CHROMIUM = Capability("chromium", _chromium)
 #: libseccomp, to put a process under a real seccomp filter (as Docker's default profile).
 SECCOMP = Capability("seccomp", _seccomp)
+#: python -m build and twine, for the release artefacts (tests/e2e/test_release.py).
+RELEASE_TOOLS = Capability("release-tools", _release_tools)
+#: bloom, rosdep and Debian's package build tools, for scripts/package_deb.sh.
+DEB_BUILD = Capability("deb-build", _deb_build)

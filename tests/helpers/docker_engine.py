@@ -474,6 +474,14 @@ def _build(
     return iidfile.read_text().strip()
 
 
+def base_image(engine: Engine) -> str:
+    """The Debian root file system alone (debootstrap's, cached as build_images caches it)."""
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    with _flocked(cache / "build.lock"):
+        return _rootfs(engine, cache, [])
+
+
 def build_images(engine: Engine) -> Images:
     """The stand-in base and the project's image on it, each built at most once per content.
 

@@ -11,12 +11,15 @@ same invocation without the mistake goes through.
 from __future__ import annotations
 
 import os
+import platform
 from pathlib import Path
 
 import pytest
 from helpers.cli_runs import TOUCH
-from helpers.commands import run_cli, run_runner, the_error_line
+from helpers.commands import CLI, run_cli, run_runner, the_error_line
 from helpers.results import load_result
+
+import ros_isolated_test
 
 # --- A.2: an unknown option before the command is a typo, never the command ----------------------
 
@@ -195,6 +198,19 @@ def test_missing_command_is_a_usage_error(
 
 
 # --- --help stays accurate; runner-path and status -----------------------------------------------
+
+
+def test_version_names_the_install_and_its_python(env: dict[str, str]) -> None:
+    """Which copy answers: the version, the package folder it runs from, the interpreter."""
+    proc = run_cli(["--version"], env)
+    assert proc.returncode == 0, proc.stderr
+    package = Path(ros_isolated_test.__file__).resolve().parent
+    interpreter = Path(CLI).read_text().splitlines()[0].removeprefix("#!")
+    assert proc.stdout.splitlines() == [
+        f"ros-isolated-test {ros_isolated_test.__version__}",
+        f"installed in {package}",
+        f"Python {platform.python_version()} ({interpreter})",
+    ]
 
 
 def test_run_help_names_every_variable_and_exit_code(env: dict[str, str]) -> None:
