@@ -51,7 +51,7 @@ from common import OURS, REPO, Context, Section, progress, ratio, secs
 
 from ros_isolated_test.report.measured import named_tests
 from ros_isolated_test.report.tree import read_tree
-from ros_isolated_test.shard.durations import Durations, load, write
+from ros_isolated_test.shard.durations import MICROS, Durations, load, write
 
 sys.path.insert(0, str(REPO / "examples"))
 import crosstalk_workspace
@@ -213,14 +213,14 @@ class Machines:
 def by_package(durations: Durations, total: int) -> list[list[str]]:
     """Packages by their total time, longest first, each onto the least loaded machine."""
     sums: Counter[str] = Counter()
-    for key, millis in durations.millis.items():
-        sums[key.split("/", 1)[0]] += millis
+    for key, micros in durations.micros.items():
+        sums[key.split("/", 1)[0]] += micros
     loads = [0] * total
     shares: list[list[str]] = [[] for _ in range(total)]
-    for package, millis in sorted(sums.items(), key=lambda item: (-item[1], item[0])):
+    for package, micros in sorted(sums.items(), key=lambda item: (-item[1], item[0])):
         least = loads.index(min(loads))
         shares[least].append(package)
-        loads[least] += millis
+        loads[least] += micros
     return shares
 
 
@@ -267,14 +267,14 @@ def once_each(machines: Sequence[Sequence[str]], expected: set[str]) -> str:
 
 def stale(durations: Durations, expected: set[str], where: Path) -> tuple[Path, str, str]:
     """The file with one test it knows removed from the workspace and one new one unknown."""
-    known = sorted(durations.millis)
+    known = sorted(durations.micros)
     new = known[len(known) // 2]  # a test the file will not know
-    millis = {key: value for key, value in durations.millis.items() if key != new}
+    micros = {key: value for key, value in durations.micros.items() if key != new}
     gone = "split_util/split_util_t99"  # a test the workspace no longer has
-    millis[gone] = 1000
+    micros[gone] = MICROS
     assert gone not in expected and new in expected
     path = where / "durations-stale.json"
-    write(path, Durations(millis))
+    write(path, Durations(micros))
     return path, new, gone
 
 
@@ -356,7 +356,7 @@ def run(ctx: Context) -> Section:
     )
     walls, ran_a = done[(most, "a")]
     fixed = [
-        wall - sum(durations.millis.get(key, 0) for key in ran) / 1000
+        wall - sum(durations.micros.get(key, 0) for key in ran) / MICROS
         for wall, ran in zip(walls, ran_a, strict=True)
     ]
     section.notes.append(
@@ -366,8 +366,8 @@ def run(ctx: Context) -> Section:
         "workspace (a test of another share exits 77 within about 50 ms). It is what keeps "
         "a split's makespan above the bound, the same on every machine."
     )
-    measured_total = sum(durations.millis.values()) / 1000
-    longest = max(durations.millis.values()) / 1000
+    measured_total = sum(durations.micros.values()) / MICROS
+    longest = max(durations.micros.values()) / MICROS
     section.notes.append(
         f"The durations file comes from the earlier run, (b) at N={most} (its machines' trees "
         f"merged by `report --durations`): measured total {secs(measured_total)}, longest "

@@ -152,6 +152,17 @@ def pytest_runtest_protocol(item: pytest.Item) -> None:
         state.interrupts.stop_if_interrupted()
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item) -> Generator[None, Any, None]:
+    """An item the plugin names: its run time, to the microsecond, on its teardown's report."""
+    outcome = yield
+    split = item.config.stash.get(_SHARDING, None)
+    if split is not None and split.named:
+        from ros_isolated_test.pytest_plugin import sharding
+
+        sharding.timed(item, outcome.get_result())
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_testnodedown(node: object, error: object) -> None:
     """The xdist controller: each worker's ID into the controller's --junit-xml."""

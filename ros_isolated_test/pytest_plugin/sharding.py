@@ -12,8 +12,10 @@ tests collected"): the split places the items that pytest's own selection (``-k`
 exits 5 (an xdist controller learns from its workers what the split deselected).
 
 Every item the plugin names carries its identity as the testcase property
-``ros_isolated_test_identity`` (whether split or not), so ``report --durations`` can
-measure it. ``--junit-xml`` gets the suite properties ``shard`` and ``shard_plan`` and,
+``ros_isolated_test_identity`` (whether split or not), and its run time (setup, call and
+teardown) to the microsecond as ``ros_isolated_test_seconds``, so ``report --durations``
+can measure it: pytest's own ``time`` has three decimals, a quicker item would be 0 s.
+``--junit-xml`` gets the suite properties ``shard`` and ``shard_plan`` and,
 beside it, the machine's record (``shard.record``): a merge then knows this share
 reported even when it ran nothing. The record says ``started`` from the session's start
 (an older ``--junit-xml`` file there is removed then) until pytest has written the
@@ -36,7 +38,7 @@ import pytest
 
 from ros_isolated_test import __version__
 from ros_isolated_test.pytest_plugin.options import SHARD_OPTION as OPTION
-from ros_isolated_test.shard.identity import PROPERTY, identity
+from ros_isolated_test.shard.identity import PROPERTY, SECONDS_PROPERTY, identity
 from ros_isolated_test.shard.spec import SHARD_ENV, ShardSettingError
 
 TYPE_CHECKING = False
@@ -47,6 +49,8 @@ if TYPE_CHECKING:
 _NO_TESTS = 5
 #: What an xdist worker tells its controller: how many items the split deselected.
 DESELECTED_KEY = "ros_isolated_test_split_deselected"
+#: An item's seconds so far: its setup's and call's, until its teardown reports.
+_SPENT: pytest.StashKey[float] = pytest.StashKey()
 
 
 class Sharding:
@@ -158,6 +162,20 @@ def select_items(sharding: Sharding, config: pytest.Config, items: list[pytest.I
     output = getattr(config, "workeroutput", None)
     if output is not None:  # an xdist worker: its controller collects nothing itself
         output[DESELECTED_KEY] = sharding.deselected
+
+
+def timed(item: pytest.Item, report: pytest.TestReport) -> None:
+    """The item's phases summed; its teardown's report gets the total, to the microsecond.
+
+    pytest writes a case's properties from its teardown's report (in an xdist worker
+    too, which sends the report whole), so the property lands in ``--junit-xml``.
+    """
+    spent = item.stash.get(_SPENT, 0.0) + report.duration
+    if report.when != "teardown":
+        item.stash[_SPENT] = spent
+        return
+    item.stash[_SPENT] = 0.0  # a rerun of the item (pytest-rerunfailures) counts anew
+    report.user_properties.append((SECONDS_PROPERTY, f"{spent:.6f}"))
 
 
 def worker_done(sharding: Sharding, output: dict[str, object]) -> None:

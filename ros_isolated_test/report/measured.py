@@ -11,7 +11,9 @@ one of two ways:
   file was written (``xunit.placeholder.killed_seconds``), else nothing: never the 0 s
   of its suite, which would plan the slowest tests as instant.
 - **pytest's own file, written under the plugin**: each case that carries the
-  ``ros_isolated_test_identity`` property is the item it names; it took the case's time.
+  ``ros_isolated_test_identity`` property is the item it names; it took the seconds of
+  its ``ros_isolated_test_seconds`` property (the plugin's, to the microsecond), else
+  the case's time (pytest's, to the millisecond: a quicker item reads as 0 s).
 
 Anything else (another producer's file, a case without the property) names no test a
 split places, and is left out. ``report --durations`` writes these durations
@@ -64,7 +66,10 @@ def named_tests(item: FileRead) -> list[tuple[str, float | None]]:
             split(case.identity)
         except IdentityError:
             continue  # not one a split could have placed
-        found.append((case.identity, _seconds(case.attrs.get("time", ""))))
+        seconds = _seconds(case.seconds) if case.seconds else None
+        if seconds is None:
+            seconds = _seconds(case.attrs.get("time", ""))
+        found.append((case.identity, seconds))
     return found
 
 

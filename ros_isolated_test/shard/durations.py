@@ -11,12 +11,15 @@ A small JSON object, sorted and one test a line, so a committed file diffs well:
     }
 
 Keys are test identities (:mod:`ros_isolated_test.shard.identity`), values seconds.
-Measured values keep two significant figures (:func:`rounded`: 12.34 s is 12 s, 0.456 s
-is 0.46 s), so every value is within 5% of what was measured, far finer than a test's
-run-to-run noise, while a rerun changes only the lines of tests whose time really moved;
-full precision would rewrite every line every run. Inside, a duration is a whole number
-of milliseconds: sums and comparisons are exact, so the plan cannot depend on how a
-machine rounds floats.
+Measured values keep two significant figures at every size, down to the microsecond
+(:func:`rounded`: 12.34 s is 12 s, 0.456 s is 0.46 s, a 0.000317 s pytest item is
+0.00032 s, never 0), so every value is within 5% of what was measured, far finer than a
+test's run-to-run noise, while a rerun changes only the lines of tests whose time really
+moved; full precision would rewrite every line every run. A file's values are read to
+the microsecond (six decimals): one written to the millisecond, as older versions wrote
+them, reads as it always did.
+Inside, a duration is a whole number of microseconds: sums and comparisons are exact, so
+the plan cannot depend on how a machine rounds floats.
 
 Read strictly (:func:`load`): every machine of a split must plan from the same content,
 so a missing, unreadable or malformed file is an error naming the file and the fix,
@@ -54,6 +57,8 @@ if TYPE_CHECKING:
 
 #: The file format this version writes and reads.
 VERSION = 1
+#: Microseconds in a second: the unit of every duration inside.
+MICROS = 1_000_000
 #: The longest duration a file may give: a week is no test's duration, but a unit slip.
 MAX_SECONDS = 7 * 24 * 3600
 #: The largest file read: 10,000 tests take about 600 KB.
@@ -62,6 +67,7 @@ MAX_FILE_BYTES = 64 * 1024 * 1024
 __all__ = [
     "DURATIONS_ENV",
     "MAX_SECONDS",
+    "MICROS",
     "VERSION",
     "Durations",
     "DurationsError",
@@ -78,22 +84,22 @@ class DurationsError(ShardSettingError):
 
 
 class Durations:
-    """Test identity -> whole milliseconds."""
+    """Test identity -> whole microseconds."""
 
-    __slots__ = ("_fingerprint", "_ordered", "millis")
+    __slots__ = ("_fingerprint", "_ordered", "micros")
 
-    def __init__(self, millis: Mapping[str, int]) -> None:
-        #: Identity -> whole milliseconds, in no order that matters: whatever reads it in
+    def __init__(self, micros: Mapping[str, int]) -> None:
+        #: Identity -> whole microseconds, in no order that matters: whatever reads it in
         #: order (the plan, the fingerprint, the file) sorts by identity.
-        self.millis = dict(millis)
+        self.micros = dict(micros)
         self._fingerprint: str | None = None
         self._ordered: list[str] | None = None
 
     def __len__(self) -> int:
-        return len(self.millis)
+        return len(self.micros)
 
     def __contains__(self, identity: object) -> bool:
-        return identity in self.millis
+        return identity in self.micros
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.ordered())
@@ -101,37 +107,46 @@ class Durations:
     def ordered(self) -> list[str]:
         """The identities in code point order (computed once: a file read is in it already)."""
         if self._ordered is None:
-            self._ordered = sorted(self.millis)
+            self._ordered = sorted(self.micros)
         return self._ordered
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Durations):
             return NotImplemented
-        return self.millis == other.millis
+        return self.micros == other.micros
 
     def __hash__(self) -> int:
         return hash(self.fingerprint)
 
     def __repr__(self) -> str:
-        return f"Durations({len(self.millis)} tests, {self.fingerprint})"
+        return f"Durations({len(self.micros)} tests, {self.fingerprint})"
 
     @property
     def fingerprint(self) -> str:
         """16 hex digits of the SHA-256 of the canonical content: the same on every machine.
 
         The canonical form is compact JSON, keys sorted, ASCII only, durations in whole
-        milliseconds: no float formatting and no spacing of the file reaches it.
+        milliseconds, or in microseconds (with ``"unit":"us"``) when one is finer: no
+        float formatting and no spacing of the file reaches it, and a file written to the
+        millisecond keeps the fingerprint older versions gave it (and the same plan).
         """
         if self._fingerprint is None:
             import json
 
             ordered = self.ordered()
-            millis = self.millis
-            if list(millis) != ordered:
-                millis = {key: millis[key] for key in ordered}
+            values: Mapping[str, int] = self.micros
+            document: dict[str, object] = {"version": VERSION}
+            if any(map(int.__mod__, values.values(), repeat(1000))):
+                document["unit"] = "us"
+            else:
+                values = {key: us // 1000 for key, us in values.items()}
+            if list(values) != ordered:
+                values = {key: values[key] for key in ordered}
             # As json.dumps(..., sort_keys=True) writes it, without sorting again.
             canonical = json.dumps(
-                {"durations": millis, "version": VERSION}, separators=(",", ":"), ensure_ascii=True
+                {"durations": values, **dict(sorted(document.items()))},
+                separators=(",", ":"),
+                ensure_ascii=True,
             )
             self._fingerprint = sha256(canonical.encode("ascii")).hex()[:16]
         return self._fingerprint
@@ -140,36 +155,36 @@ class Durations:
         """The file's content: version first, one test a line sorted by identity, ASCII."""
         import json
 
-        millis = self.millis
-        lines = [f"    {json.dumps(key)}: {_seconds_text(millis[key])}" for key in self.ordered()]
+        micros = self.micros
+        lines = [f"    {json.dumps(key)}: {_seconds_text(micros[key])}" for key in self.ordered()]
         body = "{\n" + ",\n".join(lines) + "\n  }" if lines else "{}"
         return f'{{\n  "version": {VERSION},\n  "durations": {body}\n}}\n'
 
 
-def _seconds_text(ms: int) -> str:
-    """Whole milliseconds as seconds, no trailing zeros: ``12``, ``1.2``, ``0.045``."""
-    whole, part = divmod(ms, 1000)
-    return f"{whole}.{part:03d}".rstrip("0").rstrip(".")
+def _seconds_text(us: int) -> str:
+    """Whole microseconds as seconds, no trailing zeros: ``12``, ``1.2``, ``0.00032``."""
+    whole, part = divmod(us, MICROS)
+    return f"{whole}.{part:06d}".rstrip("0").rstrip(".")
 
 
-def _two_figures(ms: int) -> int:
-    """``ms`` kept to two significant figures (half up); below 100 ms, to the millisecond."""
-    if ms < 100:
-        return ms
-    step = int(10 ** (len(str(ms)) - 2))
-    return (ms + step // 2) // step * step
+def _two_figures(us: int) -> int:
+    """``us`` kept to two significant figures (half up); below 100 us, to the microsecond."""
+    if us < 100:
+        return us
+    step = int(10 ** (len(str(us)) - 2))
+    return (us + step // 2) // step * step
 
 
 def rounded(seconds: float) -> int:
-    """A measured duration as the file keeps it: whole milliseconds, two significant figures.
+    """A measured duration as the file keeps it: whole microseconds, two significant figures.
 
     Raises ValueError for a value no file may hold (see :func:`load`).
     """
     problem = _bad_seconds(seconds)
     if problem is not None:
         raise ValueError(problem)
-    ms: int = round(seconds * 1000)
-    return _two_figures(ms)
+    us: int = round(seconds * MICROS)
+    return _two_figures(us)
 
 
 def _bad_seconds(value: object) -> str | None:
@@ -200,8 +215,8 @@ def merge(runs: Iterable[Durations]) -> Durations:
     """
     samples: dict[str, list[int]] = {}
     for run in runs:
-        for key, ms in run.millis.items():
-            samples.setdefault(key, []).append(ms)
+        for key, us in run.micros.items():
+            samples.setdefault(key, []).append(us)
     merged = {}
     for key, values in samples.items():
         values.sort()
@@ -274,7 +289,7 @@ def _content(data: bytes) -> object:
 
 
 def _checked(content: object) -> dict[str, int]:
-    """The durations in the file's JSON value, in whole milliseconds."""
+    """The durations in the file's JSON value, in whole microseconds."""
     if not isinstance(content, dict):
         kind = type(content).__name__
         raise _Wrong(f"it holds a JSON {kind}, not an object with version and durations")
@@ -304,7 +319,7 @@ def _checked(content: object) -> dict[str, int]:
         and not any(map(str.endswith, tests, repeat(SEPARATOR)))  # a name after it
     ):
         _first_wrong(tests)  # (or, rarely, a name that ends in "/": then none is wrong)
-    return dict(zip(tests, map(round, map(mul, values, repeat(1000))), strict=True))
+    return dict(zip(tests, map(round, map(mul, values, repeat(MICROS))), strict=True))
 
 
 def _first_wrong(tests: dict[str, object]) -> None:

@@ -23,9 +23,14 @@ SEPARATOR = "/"
 #: The testcase property a pytest item's identity is recorded under in pytest's
 #: ``--junit-xml`` file (the plugin adds it), so ``report --durations`` can name the item.
 PROPERTY = "ros_isolated_test_identity"
+#: The testcase property the plugin records the item's run time under beside it, in
+#: seconds to the microsecond: pytest's own ``time`` has three decimals, so a quicker
+#: item would read as 0 s.
+SECONDS_PROPERTY = "ros_isolated_test_seconds"
 
 __all__ = [
     "PROPERTY",
+    "SECONDS_PROPERTY",
     "SEPARATOR",
     "IdentityError",
     "PackageNameError",

@@ -10,10 +10,14 @@ once over the N machines, whichever tests exist, as long as they all read the sa
 
 - **Tests the file knows**: longest first, each onto the share with the least load so far
   (LPT); equal durations go in identity order, and equal loads to the share with the
-  fewest tests, then the lowest; loads are whole numbers, so the arithmetic is exact
-  everywhere. Tests of no measurable duration (0 in the file) cost no share any time: they
-  go to the share with the fewest tests so far, so they spread by count rather than pile
-  onto whichever share is least loaded. LPT's longest share is at most
+  fewest tests, then the lowest; loads are whole microseconds, so the arithmetic is exact
+  everywhere. Tests quicker than :data:`QUICK` (a millisecond, 0 included) are placed by
+  count after the others: each onto the share with the fewest tests so far, then the
+  lowest. Their measured time is then no better a guide than their number (the work
+  around each test that no measurement holds, its report and its line in the result
+  file, is of the same order), and as weights they would pile onto whichever share is
+  least loaded; by count, 16 of them over 3 shares are 6/5/5 whatever they measured, and
+  among tests of seconds they add about the same to every share. LPT's longest share is at most
   4/3 of the best possible, and it is far closer when there are many more tests than
   shares (its excess is at most the one test placed last on the longest share). A search
   for the exact optimum would chase the noise of the measurements themselves (a test's
@@ -40,7 +44,10 @@ if TYPE_CHECKING:
 
     from ros_isolated_test.shard.durations import Durations
 
-__all__ = ["Placed", "Plan"]
+__all__ = ["QUICK", "Placed", "Plan"]
+
+#: Tests measured below this many microseconds (a millisecond) are placed by count.
+QUICK = 1000
 
 #: Bits of a share's index in the loads heap: room for 1023 shares (MAX_TOTAL is 1000).
 _INDEX_BITS = 10
@@ -56,17 +63,17 @@ _COUNT_AND_INDEX = (1 << _LOAD_SHIFT) - 1
 class Placed:
     """One test in the plan as shown: its identity, weight and whether the file knew it."""
 
-    __slots__ = ("identity", "known", "millis")
+    __slots__ = ("identity", "known", "micros")
 
-    def __init__(self, identity: str, millis: int, known: bool) -> None:
+    def __init__(self, identity: str, micros: int, known: bool) -> None:
         self.identity = identity
-        #: Its duration in the file, or the file's median for a test it does not know
-        #: (0 when the split is by count).
-        self.millis = millis
+        #: Its duration in the file (microseconds), or the file's median for a test it
+        #: does not know (0 when the split is by count).
+        self.micros = micros
         self.known = known
 
     def __repr__(self) -> str:
-        return f"Placed({self.identity!r}, {self.millis}, known={self.known})"
+        return f"Placed({self.identity!r}, {self.micros}, known={self.known})"
 
 
 class Plan:
@@ -94,31 +101,32 @@ class Plan:
         """The file's median duration (the lower middle): the weight of a test it lacks."""
         if self.durations is None:
             return 0
-        values = sorted(self.durations.millis.values())
+        values = sorted(self.durations.micros.values())
         return values[(len(values) - 1) // 2]
 
     def _placing(self, durations: Durations) -> Iterator[tuple[str, int]]:
         """Each test of the file with its share, longest first (LPT)."""
         import heapq
 
-        millis = durations.millis
+        micros = durations.micros
         # Longest first; equal durations by identity (a stable sort of the sorted
         # identities): no dict order, no hash.
-        order = sorted(durations.ordered(), key=millis.__getitem__, reverse=True)
+        order = sorted(durations.ordered(), key=micros.__getitem__, reverse=True)
         # Each share's load, count of tests and index in one integer (load, then count,
         # then index, from the top bits): the least is the least loaded share, ties going
         # to the one with fewest tests, then to the lowest index.
         loads = list(range(1, self.total + 1))  # a heap already
         placed = 0
         for key in order:
-            weight = millis[key]
-            if not weight:
-                break  # the rest weigh nothing (longest first): placed by count below
+            weight = micros[key]
+            if weight < QUICK:
+                break  # the rest are quicker still (longest first): placed by count below
             least = loads[0]
             yield key, least & _INDEX_MASK
             heapq.heapreplace(loads, least + (weight << _LOAD_SHIFT) + _ONE_TEST)
             placed += 1
-        # Weightless tests change no load: onto the share with the fewest tests so far.
+        # Quick tests by count: onto the share with the fewest tests so far (their time
+        # is left out of the heap: it decides nothing here).
         counts = [entry & _COUNT_AND_INDEX for entry in loads]
         heapq.heapify(counts)
         for key in order[placed:]:
@@ -161,11 +169,11 @@ class Plan:
         listing: list[list[Placed]] = [[] for _ in range(self.total)]
         if self.durations is not None:
             for key, index in self._place().items():
-                listing[index - 1].append(Placed(key, self.durations.millis[key], True))
+                listing[index - 1].append(Placed(key, self.durations.micros[key], True))
         median = self.median
         for key in sorted(set(found)):
             if not self.knows(key):
                 listing[spread(key, self.total) - 1].append(Placed(key, median, False))
         for tests in listing:
-            tests.sort(key=lambda test: (-test.millis, test.identity))
+            tests.sort(key=lambda test: (-test.micros, test.identity))
         return listing

@@ -4,14 +4,15 @@ What a user needs to pick N before paying for machines: each share's tests and e
 time, and the lower bound no split can beat (the larger of the total over N and the
 longest test), with how far the longest share is above it. Identical on every machine
 and Python for the same input: ordered by share, then longest first, then identity, and
-every figure computed from whole milliseconds.
+every figure computed from whole microseconds.
 """
 
 from __future__ import annotations
 
 import json
 
-from ros_isolated_test.shard.plan import Placed, Plan
+from ros_isolated_test.shard.durations import MICROS
+from ros_isolated_test.shard.plan import QUICK, Placed, Plan
 from ros_isolated_test.text import display_text
 
 TYPE_CHECKING = False
@@ -22,7 +23,7 @@ __all__ = ["Summary", "as_json", "seconds", "summary", "text"]
 
 
 class Summary:
-    """The figures of a plan over a set of tests, in whole milliseconds."""
+    """The figures of a plan over a set of tests, in whole microseconds."""
 
     __slots__ = (
         "best_possible",
@@ -37,15 +38,15 @@ class Summary:
     def __init__(self, plan: Plan, found: Iterable[str] | None) -> None:
         found = None if found is None else set(found)
         self.listing = plan.shares(found or ())
-        self.loads = [sum(test.millis for test in tests) for tests in self.listing]
+        self.loads = [sum(test.micros for test in tests) for tests in self.listing]
         self.total = sum(self.loads)
         self.longest_test = max(
-            (test.millis for tests in self.listing for test in tests), default=0
+            (test.micros for tests in self.listing for test in tests), default=0
         )
         #: The lower bound: the larger of the total over N and the longest test.
         self.lower_bound = max(-(-self.total // plan.total), self.longest_test)
         # Of the N+1 longest tests two share a machine: no split beats the two shortest.
-        weights = sorted((test.millis for tests in self.listing for test in tests), reverse=True)
+        weights = sorted((test.micros for tests in self.listing for test in tests), reverse=True)
         pair = weights[plan.total - 1] + weights[plan.total] if len(weights) > plan.total else 0
         #: No split can end sooner: the lower bound, or that pair where it is larger.
         self.best_possible = max(self.lower_bound, pair)
@@ -54,7 +55,7 @@ class Summary:
         self.gone = (
             []
             if not found or plan.durations is None
-            else sorted(key for key in plan.durations.millis if key not in found)
+            else sorted(key for key in plan.durations.micros if key not in found)
         )
 
     @property
@@ -68,12 +69,17 @@ def summary(plan: Plan, found: Iterable[str] | None = None) -> Summary:
     return Summary(plan, found)
 
 
-def seconds(ms: int) -> str:
-    """Milliseconds as seconds to show: two decimals below 10 s, one above."""
-    hundredths = (ms + 5) // 10
+def seconds(us: int) -> str:
+    """Microseconds to show: two decimals of a second below 10 s, one above.
+
+    Below 10 ms (not 0), milliseconds to the microsecond: a 0.3 ms test is no ``0.00 s``.
+    """
+    if 0 < us < 10_000:
+        return f"{us // 1000}.{us % 1000:03d} ms"
+    hundredths = (us + 5000) // 10_000
     if hundredths < 1000:
         return f"{hundredths // 100}.{hundredths % 100:02d} s"
-    tenths = (ms + 50) // 100
+    tenths = (us + 50_000) // 100_000
     return f"{tenths // 10}.{tenths % 10} s"
 
 
@@ -94,7 +100,7 @@ def _test_line(test: Placed, width: int, by_count: bool) -> str:
     if by_count:
         return f"  {name}"
     note = "" if test.known else "  (new: not in the durations file, weighed as the median)"
-    return f"  {seconds(test.millis).rjust(width)}  {name}{note}"
+    return f"  {seconds(test.micros).rjust(width)}  {name}{note}"
 
 
 def text(plan: Plan, found: Iterable[str] | None = None, source: str | None = None) -> str:
@@ -128,12 +134,20 @@ def text(plan: Plan, found: Iterable[str] | None = None, source: str | None = No
                 f"the {total + 1} longest tests must share a machine (the longest share is "
                 f"{_ratio(longest_share, figures.best_possible)} x that)"
             )
+    quick = sum(
+        1 for tests in figures.listing for test in tests if test.known and test.micros < QUICK
+    )
+    if quick and not plan.by_count:
+        lines.append(
+            f"{_tests(quick)} quicker than a millisecond: placed by count (onto the share "
+            "with the fewest tests), their time too small to balance by"
+        )
     if figures.gone:
         lines.append(
             f"{_tests(len(figures.gone))} of the file not in the trees (removed since, or not "
             "run there): still placed, they make their shares look longer"
         )
-    shown = [seconds(test.millis) for tests in figures.listing for test in tests]
+    shown = [seconds(test.micros) for tests in figures.listing for test in tests]
     width = max(map(len, shown), default=0)
     for index, tests in enumerate(figures.listing, start=1):
         lines.append("")
@@ -151,8 +165,8 @@ def as_json(plan: Plan, found: Iterable[str] | None = None, source: str | None =
     figures = summary(plan, found)
     by_count = plan.by_count
 
-    def timed(ms: int) -> float | None:
-        return None if by_count else ms / 1000
+    def timed(us: int) -> float | None:
+        return None if by_count else us / MICROS
 
     document = {
         "total": plan.total,
@@ -173,7 +187,7 @@ def as_json(plan: Plan, found: Iterable[str] | None = None, source: str | None =
                 "share": f"{index}/{plan.total}",
                 "expected_seconds": timed(figures.loads[index - 1]),
                 "tests": [
-                    {"identity": test.identity, "seconds": timed(test.millis), "known": test.known}
+                    {"identity": test.identity, "seconds": timed(test.micros), "known": test.known}
                     for test in tests
                 ],
             }

@@ -3,7 +3,7 @@
 The parser's target. It knows the shapes producers write (``testsuites``, ``testsuite``
 and ``testcase`` with their failure, error and skipped elements; the ``status`` and
 ``result`` attributes of gtest's and ctest's disabled tests; a suite's ``<property>``
-elements, and of a case's only its identity (``shard.identity.PROPERTY``); Surefire's
+elements, and of a case's only its identity and time (``shard.identity``); Surefire's
 rerun and flaky elements, with an attempt's own output) and keeps only what the
 normaliser reads. Apart from the stages before it (``sanitiser``,
 ``safe_parser``) because it sees elements, never bytes: its bounds are on what is kept
@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import cast
 
 from ros_isolated_test.shard.identity import PROPERTY as IDENTITY_PROPERTY
+from ros_isolated_test.shard.identity import SECONDS_PROPERTY
 from ros_isolated_test.text import BoundedText, bounded
 from ros_isolated_test.xunit.raw import RawCase, RawOutcome, RawSuite, ReadResult
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT
@@ -234,10 +235,13 @@ class Builder:
             properties.setdefault(attrs["name"], attrs.get("value", ""))
 
     def _case_property(self, case: RawCase, attrib: object) -> None:
-        """A case's property: only its identity is kept (the first one it names)."""
+        """A case's property: only its identity and time are kept (the first of each)."""
         attrs = self.budget.attrs(attrib, _PROPERTY_KEYS, self.further)
-        if attrs.get("name") == IDENTITY_PROPERTY and not case.identity:
+        name = attrs.get("name")
+        if name == IDENTITY_PROPERTY and not case.identity:
             case.identity = attrs.get("value", "")
+        elif name == SECONDS_PROPERTY and not case.seconds:
+            case.seconds = attrs.get("value", "")
 
     def _start_case(self, attrib: object) -> None:
         suite_name = self.suites[-1].name if self.suites else ""

@@ -42,6 +42,9 @@ class RawCase:
     #: only, for ``report --durations`` and a split's merge (the canonical schema has no
     #: testcase properties). "" when the case has none.
     identity: str = ""
+    #: Its ``ros_isolated_test_seconds`` property (the plugin's time of the item, to the
+    #: microsecond), as written; "" when the case has none.
+    seconds: str = ""
 
 
 @dataclass(slots=True)

@@ -84,7 +84,7 @@ def _merge(lines: list[str], cwd: Path) -> None:
     for line in lines:
         if line.startswith("ros-isolated-test "):
             _bash(line, {}, cwd)
-    assert set(load(cwd / "durations.json").millis) == set(TESTS)
+    assert set(load(cwd / "durations.json").micros) == set(TESTS)
     counted = _bash("ros-isolated-test report --json " + " ".join(
         line.split()[-1] for line in lines if line.startswith("ros-isolated-test report --html")
     ), {}, cwd)  # fmt: skip

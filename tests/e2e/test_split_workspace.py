@@ -231,7 +231,7 @@ def test_each_test_ran_in_exactly_one_share(split: Split) -> None:
 def test_the_shares_follow_the_plan_shard_plan_prints(split: Split) -> None:
     """What each machine ran is what ``shard --plan`` shows before paying for them."""
     durations = split.root / "durations.json"
-    assert set(load(durations).millis) == set(_identities(split.trees["whole"]))
+    assert set(load(durations).micros) == set(_identities(split.trees["whole"]))
     plan = json.loads(
         run_cli(
             ["shard", "--plan", "--json", "--durations", str(durations), "--total", str(SHARES)],

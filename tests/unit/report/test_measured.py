@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -154,3 +155,72 @@ def test_an_older_runners_placeholder_measured_nothing_not_zero(tmp_path: Path) 
         (folder / f"{name}.xml").write_bytes(serialise.serialize(suite))
     assert _tests(folder / "killed.xml") == [("pkg/killed", None)]
     assert _tests(folder / "skipped.xml") == [("pkg/skipped", 0.0)]  # the control
+
+
+#: Sixteen pytest items that do nothing: each takes well under a millisecond.
+_QUICK_ITEMS = "".join(f"def test_{n:02d}():\n    pass\n\n" for n in range(16))
+
+
+def _case_seconds(junit: Path) -> dict[str, tuple[str, str]]:
+    """Each case's identity -> (pytest's ``time``, the plugin's ``ros_isolated_test_seconds``)."""
+    from lxml import etree
+
+    from ros_isolated_test.shard.identity import PROPERTY, SECONDS_PROPERTY
+
+    found = {}
+    for case in etree.parse(str(junit)).getroot().iter("testcase"):
+        props = {p.get("name"): p.get("value") for p in case.iterfind("properties/property")}
+        found[str(props[PROPERTY])] = (str(case.get("time")), str(props[SECONDS_PROPERTY]))
+    return found
+
+
+def test_quick_pytest_items_are_measured_to_the_microsecond_and_spread_by_count(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """Issue 41 item 8, through real processes: pytest under the plugin, ``report
+    --durations``, ``shard --plan``. pytest's own ``time`` has three decimals (a quick item
+    is ``0.000``); the plugin's property keeps six, and the durations file keeps them (two
+    figures), so no item is written as 0. Control: the same file without the property is
+    read from ``time``, as before."""
+    from helpers.pytest_sessions import project, run_pytest
+
+    from ros_isolated_test.shard.durations import load, rounded
+
+    root = project(tmp_path / "pkg", _QUICK_ITEMS)
+    junit = tmp_path / "results" / "pytest.xml"
+    done = run_pytest(root, env, f"--junit-xml={junit}", "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    cases = _case_seconds(junit)
+    assert len(cases) == 16
+    for time_text, seconds_text in cases.values():
+        assert len(time_text.split(".")[1]) == 3 and len(seconds_text.split(".")[1]) == 6
+        # The same measure (setup, call and teardown), to more decimals.
+        assert abs(float(seconds_text) - float(time_text)) <= 0.0005 + 1e-9
+        assert float(seconds_text) > 0
+    written = tmp_path / "durations.json"
+    proc = run_cli(["report", "--durations", str(written), str(junit.parent)], env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    micros = load(written).micros
+    assert micros == {key: rounded(float(seconds)) for key, (_t, seconds) in cases.items()}
+    assert all(micros.values())  # none written as 0
+    for line in written.read_text().splitlines()[3:-2]:  # one test a line: at most 6 decimals
+        assert "e" not in line.split(": ")[1] and len(line.rstrip(",").split(".")[-1]) <= 6
+    # The plan from that file: the quick items by count over 3 shares (those a loaded
+    # machine slowed past a millisecond, weighed first, are evened out by the rest).
+    proc = run_cli(["shard", "--plan", "--json", "--durations", str(written), "--total", "3"], env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    counts = [len(share["tests"]) for share in json.loads(proc.stdout)["shares"]]
+    assert sum(counts) == 16 and max(counts) - min(counts) <= 1, counts
+    # Control: without the plugin's property, pytest's three decimals are all there is.
+    stripped = tmp_path / "stripped" / "pytest.xml"
+    stripped.parent.mkdir()
+    text = junit.read_text()
+    stripped.write_text(re.sub(r'<property name="ros_isolated_test_seconds" value="[^"]*" */>',
+                               "", text))  # fmt: skip
+    assert "ros_isolated_test_seconds" in text and "ros_isolated_test_seconds" not in (
+        stripped.read_text()
+    )
+    from_time = tmp_path / "from_time.json"
+    proc = run_cli(["report", "--durations", str(from_time), str(stripped.parent)], env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert load(from_time).micros == {key: rounded(float(t)) for key, (t, _s) in cases.items()}

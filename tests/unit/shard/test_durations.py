@@ -53,30 +53,35 @@ def _error(path: Path, origin: str = DURATIONS_ENV) -> str:
 
 
 @pytest.mark.parametrize(
-    ("seconds", "ms"),
+    ("seconds", "us"),
     [
         (0, 0),
-        (0.0004, 0),
-        (0.0456, 46),  # below 100 ms: to the millisecond
-        (0.099, 99),
-        (0.1234, 120),
-        (0.456, 460),
-        (1.0, 1000),
-        (1.25, 1300),  # half up
-        (12.34, 12000),
-        (99.6, 100000),
-        (1234.5, 1200000),
-        (MAX_SECONDS, 600000000),
+        (0.0000004, 0),
+        (0.000007, 7),  # below 100 us: to the microsecond
+        (0.000099, 99),
+        (0.000317, 320),  # a quick pytest item: two figures, never 0
+        (0.0004, 400),
+        (0.0012345, 1200),
+        (0.0456, 46000),
+        (0.099, 99000),
+        (0.1234, 120000),
+        (0.456, 460000),
+        (1.0, 1000000),
+        (1.25, 1300000),  # half up
+        (12.34, 12000000),
+        (99.6, 100000000),
+        (1234.5, 1200000000),
+        (MAX_SECONDS, 600000000000),
     ],
 )
-def test_a_measurement_keeps_two_significant_figures(seconds: float, ms: int) -> None:
-    assert rounded(seconds) == ms
+def test_a_measurement_keeps_two_significant_figures(seconds: float, us: int) -> None:
+    assert rounded(seconds) == us
 
 
 def test_rounding_keeps_every_value_within_five_percent() -> None:
     for tenths in range(1, 100000, 7):
-        seconds = tenths / 10 + 0.0123
-        assert abs(rounded(seconds) / 1000 - seconds) <= 0.05 * seconds
+        for seconds in (tenths / 10 + 0.0123, tenths / 1e7 + 0.0000123):
+            assert abs(rounded(seconds) / 1e6 - seconds) <= 0.05 * seconds
 
 
 def test_a_rerun_with_noise_changes_few_lines() -> None:
@@ -178,7 +183,7 @@ def test_writing_where_no_file_can_be_is_one_line(tmp_path: Path) -> None:
 
 def test_a_good_file_is_read(tmp_path: Path) -> None:
     loaded = load(_file(tmp_path, GOOD))
-    assert loaded.millis == {"pkg/test_a": 1500, "pkg/test_b": 12000}
+    assert loaded.micros == {"pkg/test_a": 1500000, "pkg/test_b": 12000000}
     assert list(loaded) == ["pkg/test_a", "pkg/test_b"]
     assert "pkg/test_a" in loaded
     assert "pkg/test_c" not in loaded
@@ -190,9 +195,39 @@ def test_a_file_with_a_byte_order_mark_and_any_spacing_is_read(tmp_path: Path) -
     assert load(path) == load(_file(tmp_path, GOOD, "plain.json"))
 
 
-def test_a_value_is_read_to_the_millisecond(tmp_path: Path) -> None:
-    loaded = load(_file(tmp_path, {"version": 1, "durations": {"p/t": 1.2345, "p/u": 3}}))
-    assert loaded.millis == {"p/t": 1234, "p/u": 3000}
+def test_a_value_is_read_to_the_microsecond(tmp_path: Path) -> None:
+    content = {"p/t": 1.2345674, "p/u": 3, "p/v": 0.000317, "p/w": 0.0000004, "p/x": 0.045}
+    loaded = load(_file(tmp_path, {"version": 1, "durations": content}))
+    assert loaded.micros == {"p/t": 1234567, "p/u": 3000000, "p/v": 317, "p/w": 0, "p/x": 45000}
+
+
+def test_a_quick_test_is_written_and_read_back_to_the_microsecond(tmp_path: Path) -> None:
+    """The pile-up of issue 41: a 0.3 ms item was written as 0."""
+    path = tmp_path / "durations.json"
+    write(path, measured({"p/quick": 0.000317, "p/quicker": 0.0000071, "p/slow": 2.0}))
+    assert json.loads(path.read_text())["durations"] == {
+        "p/quick": 0.00032,
+        "p/quicker": 0.000007,
+        "p/slow": 2,
+    }
+    assert '"p/quick": 0.00032,' in path.read_text()  # no exponent: six decimals at most
+    assert load(path).micros == {"p/quick": 320, "p/quicker": 7, "p/slow": 2000000}
+
+
+def test_a_file_written_to_the_millisecond_reads_as_before(tmp_path: Path) -> None:
+    """An older version's file: the same seconds, the same fingerprint, written back alike."""
+    old = (
+        '{\n  "version": 1,\n  "durations": {\n    "p/a": 0.045,\n    "p/b": 0,\n'
+        '    "p/c": 1.2,\n    "p/d": 310\n  }\n}\n'
+    )
+    path = _file(tmp_path, old)
+    loaded = load(path)
+    assert loaded.micros == {"p/a": 45000, "p/b": 0, "p/c": 1200000, "p/d": 310000000}
+    # The canonical form of a file to the millisecond is the one older versions hashed.
+    canonical = b'{"durations":{"p/a":45,"p/b":0,"p/c":1200,"p/d":310000},"version":1}'
+    assert loaded.fingerprint == hashlib.sha256(canonical).hexdigest()[:16]
+    write(tmp_path / "again.json", loaded)
+    assert (tmp_path / "again.json").read_text() == old
 
 
 def test_a_missing_file(tmp_path: Path) -> None:
@@ -274,7 +309,7 @@ def test_a_malformed_file_is_one_line_saying_what_is_wrong(
 
 def test_a_test_name_may_end_in_a_slash(tmp_path: Path) -> None:
     path = _file(tmp_path, {"version": 1, "durations": {"pkg/dir/": 1, "pkg/t": 2}})
-    assert load(path).millis == {"pkg/dir/": 1000, "pkg/t": 2000}
+    assert load(path).micros == {"pkg/dir/": 1000000, "pkg/t": 2000000}
     # Control: a package with no name after its "/" is refused.
     assert "is not <package>/<test>" in _error(
         _file(tmp_path, {"version": 1, "durations": {"pkg/": 1}})
@@ -320,11 +355,17 @@ def test_the_fingerprint_is_of_the_content_not_the_bytes(tmp_path: Path) -> None
 
 def test_the_fingerprint_is_sha256_of_the_canonical_form() -> None:
     """Pinned: the same on every machine and Python, and from one version of ours to the next."""
-    loaded = Durations({"pkg/test_a": 1500, "pkg/test_b": 12000})
+    loaded = Durations({"pkg/test_a": 1500000, "pkg/test_b": 12000000})
     canonical = b'{"durations":{"pkg/test_a":1500,"pkg/test_b":12000},"version":1}'
     assert loaded.fingerprint == hashlib.sha256(canonical).hexdigest()[:16]
     assert loaded.fingerprint == "73a3e8586c369f12"
     assert Durations({}).fingerprint != loaded.fingerprint
+    # A value finer than a millisecond: in microseconds, the unit said.
+    finer = Durations({"pkg/test_a": 1500000, "pkg/test_b": 317})
+    canonical = b'{"durations":{"pkg/test_a":1500000,"pkg/test_b":317},"unit":"us","version":1}'
+    assert finer.fingerprint == hashlib.sha256(canonical).hexdigest()[:16]
+    # Control: no two contents share one form (1.5 s and 317 us is not 1500 and 0.317 ms).
+    assert finer.fingerprint != Durations({"pkg/test_a": 1500000, "pkg/test_b": 0}).fingerprint
 
 
 # --- merging ------------------------------------------------------------------------------
@@ -339,10 +380,12 @@ def test_shards_of_one_run_merge_into_their_union() -> None:
 def test_a_test_of_several_runs_is_their_median() -> None:
     runs = [measured({"p/t": 10, "p/once": 5}), measured({"p/t": 11}), measured({"p/t": 300})]
     merged = merge(runs)
-    assert merged.millis == {"p/t": 11000, "p/once": 5000}  # the timed-out 300 s is ignored
+    assert merged.micros == {"p/t": 11000000, "p/once": 5000000}  # the timed-out 300 s is ignored
     assert merge(reversed(runs)) == merged  # the order does not matter
     two = merge([measured({"p/t": 10}), measured({"p/t": 13})])
-    assert two.millis == {"p/t": 12000}  # even: the mean of the middle two, rounded
+    assert two.micros == {"p/t": 12000000}  # even: the mean of the middle two, rounded
+    quick = merge([measured({"p/q": 0.000301}), measured({"p/q": 0.000342})])
+    assert quick.micros == {"p/q": 320}  # the same below a millisecond
 
 
 def test_merging_nothing_is_empty() -> None:

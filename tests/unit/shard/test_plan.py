@@ -12,7 +12,7 @@ import pytest
 
 from ros_isolated_test.shard.durations import Durations, measured
 from ros_isolated_test.shard.identity import spread
-from ros_isolated_test.shard.plan import Plan
+from ros_isolated_test.shard.plan import QUICK, Plan
 from ros_isolated_test.shard.spec import MAX_TOTAL
 from ros_isolated_test.shard.view import summary
 
@@ -106,9 +106,9 @@ def test_asking_in_any_order_gives_the_whole_plans_answers() -> None:
 
 def test_ties_are_broken_by_identity_never_by_the_files_order() -> None:
     same = {f"p/t{number}": 1.0 for number in range(20)}
-    forward = Durations({key: 1000 for key in same})
-    backward = Durations({key: 1000 for key in reversed(list(same))})
-    assert list(forward.millis) != list(backward.millis)  # control: the orders differ
+    forward = Durations({key: 1_000_000 for key in same})
+    backward = Durations({key: 1_000_000 for key in reversed(list(same))})
+    assert list(forward.micros) != list(backward.micros)  # control: the orders differ
     plans = [Plan(3, durations) for durations in (forward, backward)]
     assert [plans[0].share_of(key) for key in same] == [plans[1].share_of(key) for key in same]
     # Equal durations go round the shares in the identities' order.
@@ -130,7 +130,10 @@ def test_the_plan_is_pinned() -> None:
 
 
 def _perfect_split(seed: int) -> tuple[int, int, dict[str, int]]:
-    """(shares, load, tests): skewed tests cut from that many shares of exactly that load."""
+    """(shares, load, tests): skewed tests cut from that many shares of exactly that load.
+
+    Drawn in milliseconds, given in microseconds (as a plan weighs them).
+    """
     rng = random.Random(seed)
     total = rng.randint(2, 8)
     load = 600_000  # ms per share in the perfect split
@@ -146,7 +149,7 @@ def _perfect_split(seed: int) -> tuple[int, int, dict[str, int]]:
             tests[f"pkg_{share}/short_{number}"] = piece
             left -= piece
             number += 1
-    return total, load, tests
+    return total, load * 1000, {key: ms * 1000 for key, ms in tests.items()}
 
 
 @pytest.mark.parametrize("seed", range(40))
@@ -164,8 +167,8 @@ def test_control_the_same_sets_split_by_count_miss_the_ten_percent() -> None:
     for seed in range(40):
         total, load, tests = _perfect_split(seed)
         loads = [0] * total
-        for identity, ms in tests.items():
-            loads[spread(identity, total) - 1] += ms
+        for identity, us in tests.items():
+            loads[spread(identity, total) - 1] += us
         missed += max(loads) > 1.10 * load
     assert missed > 30
 
@@ -184,23 +187,23 @@ def test_the_pair_bound_explains_where_the_lower_bound_cannot_be_reached() -> No
     """Five tests of 100 s over 4 shares: 125 s is the lower bound, 200 s the best split."""
     plan = Plan(4, measured({f"p/t{number}": 100 for number in range(5)}))
     figures = summary(plan)
-    assert figures.lower_bound == 125_000
-    assert figures.best_possible == max(figures.loads) == 200_000
+    assert figures.lower_bound == 125_000_000
+    assert figures.best_possible == max(figures.loads) == 200_000_000
 
 
 def test_a_test_the_file_lacks_goes_by_its_hash_and_weighs_the_median() -> None:
     durations = measured({"p/a": 1, "p/b": 2, "p/c": 30, "p/d": 40})
     plan = Plan(4, durations)
-    assert plan.median == 2000  # the lower middle: a duration the file has
+    assert plan.median == 2_000_000  # the lower middle: a duration the file has
     assert plan.knows("p/a") and not plan.knows("p/new")
     assert plan.share_of("p/new") == spread("p/new", 4)
     placed = [test for tests in plan.shares(["p/new", "p/a"]) for test in tests]
-    assert sorted((test.identity, test.millis, test.known) for test in placed) == [
-        ("p/a", 1000, True),
-        ("p/b", 2000, True),
-        ("p/c", 30000, True),
-        ("p/d", 40000, True),
-        ("p/new", 2000, False),
+    assert sorted((test.identity, test.micros, test.known) for test in placed) == [
+        ("p/a", 1_000_000, True),
+        ("p/b", 2_000_000, True),
+        ("p/c", 30_000_000, True),
+        ("p/d", 40_000_000, True),
+        ("p/new", 2_000_000, False),
     ]
 
 
@@ -234,7 +237,7 @@ def test_one_share_runs_everything() -> None:
 def test_tests_of_no_measured_duration_spread_by_count() -> None:
     """Issue 41 item 8: 0 s tests went all to the least loaded share (13 of 16 on one)."""
     mixed = {
-        **{f"p/slow_{number}": 1000 for number in range(4)},
+        **{f"p/slow_{number}": 1_000_000 for number in range(4)},
         **{f"p/instant_{number:02d}": 0 for number in range(12)},
     }
     for tests, counts in ((mixed, [6, 5, 5]), ({f"p/t{n:02d}": 0 for n in range(16)}, [6, 5, 5])):
@@ -251,3 +254,69 @@ def test_tests_of_no_measured_duration_spread_by_count() -> None:
         random.Random(3).shuffle(names)
         asked = Plan(3, durations)
         assert {key: asked.share_of(key) for key in names} == whole
+
+
+def _one_plan_everywhere(durations: Durations, total: int) -> list[list[str]]:
+    """Each share's tests, checked to be what a RUNNER (one test, a plan of its own) and the
+    plugin (every test in turn, in any order, from one plan) are told."""
+    listing = Plan(total, durations).shares()
+    whole = {test.identity: index for index, share in enumerate(listing, 1) for test in share}
+    assert sorted(whole) == sorted(durations)  # every test once
+    assert {key: Plan(total, durations).share_of(key) for key in durations} == whole
+    names = sorted(durations)
+    random.Random(7).shuffle(names)
+    asked = Plan(total, durations)
+    assert {key: asked.share_of(key) for key in names} == whole
+    return [[test.identity for test in share] for share in listing]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_sub_millisecond_tests_spread_by_count_whatever_they_measured(seed: int) -> None:
+    """Issue 41 item 8: 16 pytest items of 0.2 to 0.4 ms over 3 shares are 6/5/5."""
+    rng = random.Random(seed)
+    seconds = {f"py/test_q.py::test_{n:02d}": rng.uniform(0.0002, 0.0004) for n in range(16)}
+    durations = measured(seconds)
+    assert all(200 <= us <= 400 for us in durations.micros.values())  # kept, not 0
+    counts = [len(share) for share in _one_plan_everywhere(durations, 3)]
+    assert counts == [6, 5, 5]
+    counts = [len(share) for share in _one_plan_everywhere(durations, 4)]
+    assert counts == [4, 4, 4, 4]
+
+
+def test_quick_tests_go_by_count_slower_ones_by_their_time() -> None:
+    """Below QUICK (a millisecond) a test's time decides nothing; from it on, it decides.
+
+    One test of 0.9 ms and eight of 0.1 ms over 2 shares: by count, 5 and 4. The control,
+    the same times a thousand times longer (0.9 s and eight of 0.1 s): by time, the long
+    one alone and the eight together, as LPT places them.
+    """
+    assert QUICK == 1000
+    quick = {"p/a": 0.0009, **{f"p/b{n}": 0.0001 for n in range(8)}}
+    assert sorted(map(len, _one_plan_everywhere(measured(quick), 2))) == [4, 5]
+    slow = {key: value * 1000 for key, value in quick.items()}
+    assert _one_plan_everywhere(measured(slow), 2) == [["p/a"], [f"p/b{n}" for n in range(8)]]
+    # At the floor a test is weighed: 4 ms and four of 1 ms go by time (1 and 4), while
+    # four of 0.99 ms below it go by count (with the 4 ms test, 3 and 2).
+    edge = {"p/a": 0.004, **{f"p/b{n}": 0.001 for n in range(4)}}
+    assert _one_plan_everywhere(measured(edge), 2) == [["p/a"], [f"p/b{n}" for n in range(4)]]
+    below = {**edge, **{f"p/b{n}": 0.00099 for n in range(4)}}
+    assert [len(share) for share in _one_plan_everywhere(measured(below), 2)] == [3, 2]
+
+
+def test_real_tests_among_many_quick_ones_spread_sensibly() -> None:
+    """Tests of seconds balanced by time as before; hundreds of sub-ms items by count."""
+    rng = random.Random(41)
+    slow = {f"nav/test_{n}": rng.uniform(5, 60) for n in range(9)}
+    quick = {f"py/test_q.py::test_{n:03d}": rng.uniform(0.00005, 0.0009) for n in range(300)}
+    durations = measured({**slow, **quick})
+    listing = _one_plan_everywhere(durations, 4)
+    # The slow tests land where LPT puts them without the quick ones.
+    alone = _one_plan_everywhere(measured(slow), 4)
+    assert [[key for key in share if key in slow] for share in listing] == alone
+    # Every share ends within one test of the others by count, and the quick tests add
+    # well under a second to any share.
+    counts = [len(share) for share in listing]
+    assert max(counts) - min(counts) <= 1, counts
+    micros = durations.micros
+    for share in listing:
+        assert sum(micros[key] for key in share if key in quick) < 100_000

@@ -111,20 +111,25 @@ def test_the_json_by_count_has_no_seconds() -> None:
 
 
 @pytest.mark.parametrize(
-    ("ms", "shown"),
+    ("us", "shown"),
     [
         (0, "0.00 s"),
-        (4, "0.00 s"),
-        (5, "0.01 s"),
-        (1234, "1.23 s"),
-        (9994, "9.99 s"),
-        (9995, "10.0 s"),
-        (10_000, "10.0 s"),
-        (123_456, "123.5 s"),
+        (7, "0.007 ms"),  # below 10 ms: milliseconds to the microsecond, never 0.00 s
+        (317, "0.317 ms"),
+        (4_500, "4.500 ms"),
+        (9_999, "9.999 ms"),
+        (10_000, "0.01 s"),
+        (14_999, "0.01 s"),
+        (15_000, "0.02 s"),
+        (1_234_000, "1.23 s"),
+        (9_994_999, "9.99 s"),
+        (9_995_000, "10.0 s"),
+        (10_000_000, "10.0 s"),
+        (123_456_000, "123.5 s"),
     ],
 )
-def test_seconds_are_shown_to_a_tenth_or_a_hundredth(ms: int, shown: str) -> None:
-    assert seconds(ms) == shown
+def test_seconds_are_shown_to_a_tenth_or_a_hundredth(us: int, shown: str) -> None:
+    assert seconds(us) == shown
 
 
 def test_the_summary_counts_every_test_once() -> None:
@@ -231,7 +236,17 @@ def test_control_a_different_file_prints_a_different_plan(
     durations_file, found_file = plan_inputs
     loaded = load(durations_file)
     first = next(iter(loaded))
-    changed = Durations({**loaded.millis, first: loaded.millis[first] + 60_000})
+    changed = Durations({**loaded.micros, first: loaded.micros[first] + 60_000_000})
     other = tmp_path / "durations.json"
     write(other, changed)
     assert _printed(sys.executable, (other, found_file), "0") != printed_here
+
+
+def test_quick_tests_are_said_to_be_placed_by_count() -> None:
+    """Their time decides nothing (``plan.QUICK``): the header says so, and shows it."""
+    durations = measured({"p/slow": 2.0, **{f"p/q{n}": 0.000317 for n in range(5)}})
+    shown = text(Plan(2, durations))
+    assert "5 tests quicker than a millisecond: placed by count" in shown
+    assert "  0.320 ms  p/q0" in shown  # not 0.00 s
+    # Control: no such line when no test is that quick.
+    assert "quicker than" not in text(Plan(2, measured({"p/slow": 2.0, "p/q": 0.001})))

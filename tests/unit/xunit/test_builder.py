@@ -103,16 +103,20 @@ def test_a_suites_properties_are_kept_and_a_cases_are_not() -> None:
     assert result.cases[0].identity == ""
 
 
-def test_of_a_cases_properties_only_its_identity_is_kept() -> None:
-    """The pytest plugin names each item (``ros_isolated_test_identity``) for a split."""
+def test_of_a_cases_properties_only_its_identity_and_seconds_are_kept() -> None:
+    """The pytest plugin names each item (``ros_isolated_test_identity``) for a split, and
+    times it to the microsecond (``ros_isolated_test_seconds``)."""
     result = built(
         '<testsuite name="s"><testcase classname="C" name="a"><properties>'
         '<property name="other" value="x"/>'
         '<property name="ros_isolated_test_identity" value="pkg/test/t.py::a"/>'
         '<property name="ros_isolated_test_identity" value="pkg/second"/>'
+        '<property name="ros_isolated_test_seconds" value="0.000317"/>'
+        '<property name="ros_isolated_test_seconds" value="9"/>'
         '</properties></testcase><testcase classname="C" name="b"/></testsuite>'
     )
     assert [case.identity for case in result.cases] == ["pkg/test/t.py::a", ""]
+    assert [case.seconds for case in result.cases] == ["0.000317", ""]
     assert result.suites[0].properties == {}
 
 
