@@ -22,6 +22,8 @@ from ros_isolated_test.process import reaper
 
 #: Strict mode, as CI runs the suite: any skip fails (``pytest --no-skips`` does the same).
 NO_SKIPS_ENV = "ROS_ISOLATED_TEST_NO_SKIPS"
+#: ros_isolated_test.colcon.switch.VARIABLE (not imported: colcon's side stays out of the way).
+COLCON_SWITCH = "ROS_ISOLATED_TEST_COLCON"
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -43,6 +45,9 @@ def pytest_configure(config: pytest.Config) -> None:
     """
     if config.getoption("ros_isolation", None) is None:
         config.option.ros_isolation = False
+    # colcon's extension of ours is off for every colcon the suite starts (their controls
+    # build without us); tests/e2e/test_colcon_extension.py turns it on where it tests it.
+    os.environ.setdefault(COLCON_SWITCH, "off")
 
 
 #: The xdist group of the ros and colcon tests: one session runs them, one at a time.

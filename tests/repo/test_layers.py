@@ -39,6 +39,7 @@ LAYERS = (
         "cli_shard": "cli",
         "__main__": "cli",
         "pytest_plugin": "pytest plugin",
+        "colcon": "colcon extension",
     },
     {"runner": "runner"},
     {"report": "report"},
