@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from ros_isolated_test import __version__
+from ros_isolated_test.cli_history import history
 from ros_isolated_test.cli_report import report
 from ros_isolated_test.cli_shard import shard
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
@@ -98,6 +99,7 @@ def cli() -> None:
 
 cli.add_command(report)
 cli.add_command(shard)
+cli.add_command(history)
 
 
 def _finite(_ctx: click.Context, param: click.Parameter, value: float | None) -> float | None:

@@ -12,7 +12,9 @@ as the table of contents of a run; each step lives in a module of its own:
 4. ``interruption``: from here until the final word, a signal never loses the result;
 5. ``attempt``: hold an ID (``isolation``), run the test, end its tree, release;
 6. ``verdict``: how it ended becomes the final word and the exit code, or ``reruns``
-   runs it again first.
+   runs it again first;
+7. with ``ROS_ISOLATED_TEST_HISTORY`` set, the final result file into the test history
+   (``history.record``): a warning at worst, never another exit code.
 
 The pytest plugin, whose tests run in its own process, shares step 5's holding
 (:func:`~ros_isolated_test.runner.isolation.isolation`) and step 5's first lines
@@ -20,6 +22,8 @@ The pytest plugin, whose tests run in its own process, shares step 5's holding
 """
 
 from __future__ import annotations
+
+import contextlib
 
 from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
 from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
@@ -83,7 +87,24 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
             both.close()
     # A result or output file that could not be written is a failed run, never a silent pass.
     code = exit_codes.final(code, result.write_error, both.capture.file_error)
+    _recorded(result)
     return share.exit_code(request, code, console)
+
+
+def _recorded(result: ResultFile) -> None:
+    """Step 7: the result file, final now, into the history the variable names, if any."""
+    db = settings.history_database()
+    if db is None or result.path is None or result.write_error:
+        return
+    # Only when asked: sqlite3 and the report's reading are not on a test's path otherwise.
+    from ros_isolated_test.history.record import record_trees
+
+    warning = record_trees(db, [result.path])
+    if warning is not None:
+        import sys
+
+        with contextlib.suppress(OSError, ValueError):
+            print(warning, file=sys.stderr, flush=True)
 
 
 def _decided(

@@ -53,6 +53,8 @@ ISOLATION_ENV = "ROS_ISOLATED_TEST_ISOLATION"
 #: the test's own too, no waiting for an ID; ``auto``: namespace where allowed, else domain.
 ISOLATION_MODES = ("domain", "namespace", "auto")
 DEFAULT_ISOLATION = "domain"
+#: The test history database that ``run`` and the pytest plugin record into (``history``).
+HISTORY_ENV = "ROS_ISOLATED_TEST_HISTORY"
 
 __all__ = [
     "CAPACITY_ENV",
@@ -60,6 +62,7 @@ __all__ = [
     "DEFAULT_WAIT_TIMEOUT",
     "DISABLE_VAR",
     "DISCOVERY_RANGE_ENV",
+    "HISTORY_ENV",
     "ISOLATION_ENV",
     "ISOLATION_MODES",
     "LOCK_DIR_ENV",
@@ -72,6 +75,7 @@ __all__ = [
     "SettingsError",
     "defaults",
     "disables_isolation",
+    "history_database",
     "isolation_from",
     "read",
     "reruns_from",
@@ -153,6 +157,12 @@ class Settings:
             f"reruns={self.reruns!r}, "
             f"resources={describe(self.resources)!r})"
         )
+
+
+def history_database(environ: Mapping[str, str] | None = None) -> Path | None:
+    """The history database ``ROS_ISOLATED_TEST_HISTORY`` names; None when unset or empty."""
+    value = (os.environ if environ is None else environ).get(HISTORY_ENV, "")
+    return Path(value) if value else None
 
 
 def disables_isolation(value: str | None) -> bool:
