@@ -47,7 +47,7 @@ BASELINE = "ros_isolated_test.runner.ament.args"
 LIBRARIES = (
     ("pydantic_settings", "pydantic-settings", "settings: `runner/settings.py`"),
     ("junitparser", "junitparser", "result files: `xunit/reader.py`, `xunit/serialise.py`"),
-    ("tabulate", "tabulate", "the `status` table: `runner/status_table.py`"),
+    ("tabulate", "tabulate", "the `status` table: `cli/status_table.py`"),
     ("filelock", "filelock", "the lock: one `fcntl.flock`, `domain_coordinator/flock.py`"),
     ("xml.sax.saxutils", None, "XML escaping: `xunit/serialise.py`"),
     ("psutil", "psutil", "processes: `process/proc.py`"),

@@ -6,6 +6,5 @@ coordinator (``ros_isolated_test.domain_coordinator``) -> process supervisor
 (``ros_isolated_test.process``) -> result file (``ros_isolated_test.xunit``) -> exit
 code (``exit_codes``). ``session.run`` is the only place that strings them together,
 one step per module (``streams``, ``interruption``, ``attempt`` and ``isolation``,
-``verdict``, ``reruns``); ``summary`` words what a run says first, ``status_table`` what
-``status`` prints.
+``verdict``, ``reruns``); ``summary`` words what a run says first.
 """

@@ -35,9 +35,6 @@ PACKAGE = REPO / "ros_isolated_test"
 LAYERS = (
     {
         "cli": "cli",
-        "cli_report": "cli",
-        "cli_shard": "cli",
-        "cli_history": "cli",
         "__main__": "cli",
         "pytest_plugin": "pytest plugin",
         "colcon": "colcon extension",

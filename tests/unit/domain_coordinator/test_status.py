@@ -6,7 +6,7 @@ before any runner made the lock directory), when a DDS participant binds its UDP
 when a process carries it in ROS_DOMAIN_ID (a squatter; a runner's own test is none),
 or while a survivor of its last test lives: listed once, as a survivor. Runners queued
 for an ID are listed apart, in their order. Real holders, waiters, squatters and
-survivors throughout; how the table draws it: ``unit/runner/test_status_table``.
+survivors throughout; how the table draws it: ``unit/cli/test_status_table``.
 """
 
 from __future__ import annotations

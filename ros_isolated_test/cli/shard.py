@@ -3,7 +3,7 @@
 The command only parses its arguments and hands over: the plan and its rendering live
 in ``ros_isolated_test.shard``. What it reads of result trees is one function,
 :func:`tests_in`, through the report package's reading of which tests a file names.
-Added to the command group by ``cli.py`` (``cli.add_command``).
+Added to the command group by ``cli/__init__.py`` (``cli.add_command``).
 """
 
 from __future__ import annotations

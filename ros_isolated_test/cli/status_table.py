@@ -1,7 +1,7 @@
 """What ``ros-isolated-test status`` prints: the table, or its rows as JSON.
 
 The coordinator reads what is in use (``domain_coordinator.status``); this draws it.
-It sits in the runner layer because each runner's row shows its test's Gazebo
+It sits with the command, above the runner: each runner's row shows its test's Gazebo
 partition, which only the runner's ``partition`` knows how to name.
 """
 

@@ -2,7 +2,7 @@
 
 The command only parses its arguments and hands over: reading, counting, the page, a
 split's merge and the durations live in ``ros_isolated_test.report``. Added to the
-command group by ``cli.py`` (``cli.add_command``), like ``shard``.
+command group by ``cli/__init__.py`` (``cli.add_command``), like ``shard``.
 """
 
 from __future__ import annotations

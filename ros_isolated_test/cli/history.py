@@ -5,7 +5,7 @@ default subcommand (``history [TEST]...``) prints each test's status over the la
 runs; ``record``, ``prune``, ``merge``, ``export`` and ``durations`` are the others. A
 database that cannot be used is one line naming the file (exit 1; for ``record``, a
 warning and exit 0: recording never fails a run). Usage errors are one line, exit 2.
-Added to the command group by ``cli.py`` (``cli.add_command``).
+Added to the command group by ``cli/__init__.py`` (``cli.add_command``).
 """
 
 from __future__ import annotations

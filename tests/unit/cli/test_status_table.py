@@ -1,4 +1,4 @@
-"""``runner.status_table``: what ``ros-isolated-test status`` prints, the table or its JSON.
+"""``cli.status_table``: what ``ros-isolated-test status`` prints, the table or its JSON.
 
 The coordinator reads what is in use; this draws it. Each kind of use is a row saying
 what holds the ID (a runner, a port, a participant with its UDP ports, a squatter, a
@@ -18,12 +18,12 @@ from helpers.commands import run_cli, start_cli
 from helpers.coordinator import STATUS_COLUMNS, status_rows
 from helpers.processes import poll_until
 
+from ros_isolated_test.cli.status_table import as_json, gz_partition, table
 from ros_isolated_test.domain_coordinator.queue import Waiter
 from ros_isolated_test.domain_coordinator.records import Holder, iso_time
 from ros_isolated_test.domain_coordinator.resource_holds import Hold
 from ros_isolated_test.domain_coordinator.status import DomainUse, MachineStatus
 from ros_isolated_test.runner import partition
-from ros_isolated_test.runner.status_table import as_json, gz_partition, table
 
 LOCK_DIR = Path("/tmp/locks-of-this-test")
 #: 2024-01-01 at noon UTC: any time zone shows it as a time of that day.

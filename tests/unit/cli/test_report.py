@@ -1,4 +1,4 @@
-"""``cli_report``: ``ros-isolated-test report`` over a split's trees, and ``--durations``.
+"""``cli.report``: ``ros-isolated-test report`` over a split's trees, and ``--durations``.
 
 Run as a user runs it, on the trees a split's machines leave (``helpers.split_trees``):
 the merge counts each test once and exits 1, naming the problem, when a share is

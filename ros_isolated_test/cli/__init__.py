@@ -10,9 +10,9 @@ from pathlib import Path
 import click
 
 from ros_isolated_test import __version__
-from ros_isolated_test.cli_history import history
-from ros_isolated_test.cli_report import report
-from ros_isolated_test.cli_shard import shard
+from ros_isolated_test.cli.history import history
+from ros_isolated_test.cli.report import report
+from ros_isolated_test.cli.shard import shard
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
 from ros_isolated_test.process.supervisor import KILL_GRACE
 from ros_isolated_test.runner import session, settings, share
@@ -78,7 +78,7 @@ Environment:
 VERSION_MESSAGE = "\n".join(
     (
         "%(prog)s %(version)s",
-        f"installed in {Path(__file__).resolve().parent}".replace("%", "%%"),
+        f"installed in {Path(__file__).resolve().parent.parent}".replace("%", "%%"),
         f"Python {sys.version.split()[0]} ({sys.executable})".replace("%", "%%"),
     )
 )
@@ -388,8 +388,8 @@ def status(as_json: bool) -> None:
     "resources") and the capacity (one row with "via": "capacity"), when resources are
     held, asked for, or ROS_ISOLATED_TEST_CAPACITY is set.
     """
+    from ros_isolated_test.cli import status_table
     from ros_isolated_test.domain_coordinator.status import machine_status
-    from ros_isolated_test.runner import status_table
 
     try:
         # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.

@@ -1,4 +1,4 @@
-"""``cli_shard``: ``ros-isolated-test shard --plan``, run as a user runs it.
+"""``cli.shard``: ``ros-isolated-test shard --plan``, run as a user runs it.
 
 The plan a user reads before paying for machines: from a durations file, with the tests
 of result trees the file does not know, as text and JSON, the same from every process;
