@@ -24,8 +24,9 @@ modules=(
   tests/unit/domain_coordinator
   tests/e2e/test_lean_runner.py
   tests/unit/cli/test_cli.py
-  tests/unit/cli/test_cli_run.py
-  tests/unit/cli/test_cli_result_paths.py
+  tests/unit/cli/test_run_arguments.py
+  tests/unit/cli/test_run.py
+  tests/unit/cli/test_run_result_paths.py
   tests/unit/runner/ament/test_run_test_isolated.py
   tests/unit/pytest_plugin/test_plugin.py
   tests/unit/pytest_plugin/test_holding.py

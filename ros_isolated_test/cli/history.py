@@ -4,17 +4,18 @@ The command parses its arguments and hands over to ``ros_isolated_test.history``
 default subcommand (``history [TEST]...``) prints each test's status over the last
 runs; ``record``, ``prune``, ``merge``, ``export`` and ``durations`` are the others. A
 database that cannot be used is one line naming the file (exit 1; for ``record``, a
-warning and exit 0: recording never fails a run). Usage errors are one line, exit 2.
+warning and exit 0: recording never fails a run). Usage errors are the group's one
+line (``cli.usage``), exit 2.
 Added to the command group by ``cli/__init__.py`` (``cli.add_command``).
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
 
+from ros_isolated_test.cli import usage
 from ros_isolated_test.runner.settings import HISTORY_ENV, history_database
 
 #: The database when neither --db nor ROS_ISOLATED_TEST_HISTORY names one.
@@ -29,39 +30,13 @@ if TYPE_CHECKING:
 _DB_HELP = f"The history database. Default: {HISTORY_ENV}, else ./{DEFAULT_DB}."
 
 
-def _usage(ctx: click.Context, error: click.UsageError) -> NoReturn:
-    said = error.format_message().strip().removesuffix(".")
-    name = ctx.command_path.removeprefix(ctx.find_root().info_name or "").strip()
-    click.echo(f"ros-isolated-test: error: {said}; see ros-isolated-test {name} --help", err=True)
-    ctx.exit(2)
-
-
-class _OneLine(click.Command):
-    """A subcommand whose usage errors are one line (click's own are three), exit 2."""
-
-    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
-        try:
-            return super().parse_args(ctx, args)
-        except click.UsageError as error:
-            _usage(ctx, error)
-
-    def invoke(self, ctx: click.Context) -> object:
-        try:
-            return super().invoke(ctx)
-        except click.UsageError as error:
-            _usage(ctx, error)
-
-
 class _HistoryGroup(click.Group):
     """``history [OPTIONS] [TEST]...`` runs ``show``; a subcommand's name runs it."""
 
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
         if not args or (args[0] not in self.commands and args[0] != "--help"):
             args = [SHOW, *args]
-        try:
-            return super().parse_args(ctx, args)
-        except click.UsageError as error:
-            _usage(ctx, error)
+        return super().parse_args(ctx, args)
 
 
 def _db(db: Path | None) -> Path:
@@ -69,8 +44,7 @@ def _db(db: Path | None) -> Path:
 
 
 def _failed(message: str) -> NoReturn:
-    click.echo(f"ros-isolated-test: error: {message}", err=True)
-    sys.exit(1)
+    usage.fail(message, usage.FAILED)
 
 
 _db_option = click.option("--db", type=click.Path(dir_okay=False, path_type=Path), help=_DB_HELP)
@@ -85,7 +59,7 @@ def history() -> None:
     """
 
 
-@history.command(SHOW, cls=_OneLine)
+@history.command(SHOW)
 @_db_option
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list of objects.")
 @click.option(
@@ -142,7 +116,7 @@ def show(
         click.echo("no tests recorded" + (" by those names" if names else ""))
 
 
-@history.command("record", cls=_OneLine)
+@history.command("record")
 @_db_option
 @click.argument(
     "trees",
@@ -165,7 +139,7 @@ def record(db: Path | None, trees: tuple[Path, ...]) -> None:
         click.echo(warning, err=True)
 
 
-@history.command("prune", cls=_OneLine)
+@history.command("prune")
 @_db_option
 @click.option(
     "--keep", type=click.IntRange(1, 1_000_000), help="Runs to keep from now on (default 200)."
@@ -188,7 +162,7 @@ def prune(db: Path | None, keep: int | None) -> None:
     click.echo(f"{gone} run(s) dropped")
 
 
-@history.command("merge", cls=_OneLine)
+@history.command("merge")
 @click.option(
     "--db",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -214,7 +188,7 @@ def merge(db: Path, sources: tuple[Path, ...]) -> None:
     click.echo(f"{new} new run(s)")
 
 
-@history.command("export", cls=_OneLine)
+@history.command("export")
 @_db_option
 @click.option(
     "--jsonl", is_flag=True, required=True, help="One JSON object per attempt, a line each."
@@ -235,7 +209,7 @@ def export(db: Path | None, jsonl: bool) -> None:
         connection.close()
 
 
-@history.command("durations", cls=_OneLine)
+@history.command("durations")
 @_db_option
 @click.option(
     "--runs",

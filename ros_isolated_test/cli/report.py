@@ -13,6 +13,8 @@ from pathlib import Path
 
 import click
 
+from ros_isolated_test.cli import usage
+
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from ros_isolated_test.report.shards import Split
@@ -84,8 +86,7 @@ def report(
     try:
         split = shards.Split(share_from(os.environ))
     except ShardSettingError as error:
-        click.echo(f"ros-isolated-test: error: {error}", err=True)
-        sys.exit(2)
+        usage.fail(str(error), usage.USAGE)
     # A folder it cannot read is an error; a flaky case (passed after failing) is listed
     # apart and never fails the report, one that failed and was then not run always does.
     # Each file is read once (for the page too) and only its counts are kept.
@@ -101,7 +102,7 @@ def report(
             _html_report(paths, html_file, printed, split)
         printed.write(lambda piece: click.echo(piece, nl=False))
     if printed.total.failed or split.problems:
-        sys.exit(1)
+        sys.exit(usage.FAILED)
 
 
 def _html_report(
@@ -117,12 +118,9 @@ def _html_report(
         fix = "choose a writable file path"
         if isinstance(error, atomic_file.NotReplaceableError):
             fix = "name a regular file instead, or /dev/null to discard the page"
-        click.echo(
-            f"ros-isolated-test: error: cannot write --html {destination}: "
-            f"{error.strerror or error}; {fix}",
-            err=True,
+        usage.fail(
+            f"cannot write --html {destination}: {error.strerror or error}; {fix}", usage.USAGE
         )
-        sys.exit(2)
 
 
 def _write_durations(paths: tuple[Path, ...], destination: Path) -> None:
@@ -136,18 +134,16 @@ def _write_durations(paths: tuple[Path, ...], destination: Path) -> None:
     durations = gathered.durations()
     shown = " ".join(map(str, paths))
     if not durations:
-        click.echo(
-            f"ros-isolated-test: error: no test's duration in {shown} ({gathered.files} result "
+        usage.fail(
+            f"no test's duration in {shown} ({gathered.files} result "
             "file(s) read): give the result trees of a run through ros-isolated-test (the "
             "RUNNER's files, or pytest's --junit-xml under the plugin); nothing written",
-            err=True,
+            usage.USAGE,
         )
-        sys.exit(2)
     try:
         write(destination, durations)
     except DurationsError as error:
-        click.echo(f"ros-isolated-test: error: {error}", err=True)
-        sys.exit(2)
+        usage.fail(str(error), usage.USAGE)
     click.echo(
         f"{destination}: {len(durations)} tests' durations from {gathered.measuring} of "
         f"{gathered.files} result file(s) (plan {durations.fingerprint})"

@@ -9,43 +9,15 @@ Added to the command group by ``cli/__init__.py`` (``cli.add_command``).
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 import click
 
+from ros_isolated_test.cli import usage
 from ros_isolated_test.shard.spec import MAX_TOTAL
 
-TYPE_CHECKING = False
-if TYPE_CHECKING:
-    from typing import NoReturn
 
-
-class _OneLineCommand(click.Command):
-    """A command whose usage errors are one line (click's own are three), exit 2."""
-
-    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
-        try:
-            return super().parse_args(ctx, args)
-        except click.UsageError as error:
-            _usage(ctx, error)
-
-    def invoke(self, ctx: click.Context) -> object:
-        try:
-            return super().invoke(ctx)
-        except click.UsageError as error:
-            _usage(ctx, error)
-
-
-def _usage(ctx: click.Context, error: click.UsageError) -> NoReturn:
-    said = error.format_message().strip().removesuffix(".")
-    click.echo(
-        f"ros-isolated-test: error: {said}; see ros-isolated-test {ctx.info_name} --help", err=True
-    )
-    ctx.exit(2)
-
-
-@click.command("shard", cls=_OneLineCommand)
+@click.command("shard")
 @click.argument(
     "trees", nargs=-1, metavar="[TREE]...", type=click.Path(exists=True, path_type=Path)
 )
@@ -90,8 +62,7 @@ def shard(
             raise click.UsageError("nothing to plan: give --durations FILE, or result trees (TREE)")
         loaded = None if named is None else durations.load(*named)
     except ShardSettingError as error:
-        click.echo(f"ros-isolated-test: error: {error}", err=True)
-        sys.exit(2)
+        usage.fail(str(error), usage.USAGE)
     found = tests_in(trees) if trees else None
     source = None if named is None else str(named[0])
     render = view.as_json if as_json else view.text

@@ -429,7 +429,7 @@ def test_the_package_data_is_in_the_build_context(patterns: list[tuple[bool, lis
         ".venv/bin/python",
         ".venv",
         "node_modules/some-package/index.js",
-        "tests/unit/cli/test_cli_run.py",
+        "tests/unit/cli/test_run.py",
         "tests/conftest.py",
         "build/lib/ros_isolated_test/__init__.py",
         "dist/ros_isolated_test-0.1.0-py3-none-any.whl",

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 from helpers import capabilities
-from helpers.commands import run_cli
+from helpers.commands import run_cli, the_error_line
 from helpers.processes import user_keywords
 from helpers.report_text import (
     CTEST_SITE,
@@ -185,8 +185,8 @@ def test_a_folder_report_can_list_but_not_enter_fails_on_each_file_it_holds(
 def test_no_build_folder_and_no_path_is_a_usage_error(env: dict[str, str], tmp_path: Path) -> None:
     proc = run_cli(["report"], env, cwd=tmp_path)
     assert proc.returncode == 2, proc.stdout + proc.stderr
-    assert "Usage: ros-isolated-test report" in proc.stderr
-    assert "no 'build' folder" in proc.stderr
+    line = the_error_line(proc)  # one line, as every usage error (cli.usage)
+    assert "no 'build' folder" in line and line.endswith("see ros-isolated-test report --help")
     assert "Summary" not in proc.stdout
 
 
