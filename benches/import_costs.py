@@ -4,7 +4,7 @@ The runner starts once per test and its own work is a few milliseconds, so every
 it imports is paid by every test. Some jobs a library would do are written by hand for
 that reason (the "Written by hand" table of docs/contributing.md lists them, with these
 figures). This measures, for each library, what importing it adds on top of the
-RUNNER's own imports (``ros_isolated_test.runner.ament.args``), in fresh interpreters of
+RUNNER's own imports (``ros_isolated_test.ament.args``), in fresh interpreters of
 this venv, bytecode cached, as under colcon (the ROS wheels' re-exec already done):
 
 - *import time*: ``-X importtime``'s cumulative time of the modules the library's import
@@ -42,7 +42,7 @@ from common import (
 )
 
 #: What every run imports first: the ctest RUNNER's own imports.
-BASELINE = "ros_isolated_test.runner.ament.args"
+BASELINE = "ros_isolated_test.ament.args"
 #: (module imported, pip requirement, what the product does instead).
 LIBRARIES = (
     ("pydantic_settings", "pydantic-settings", "settings: `runner/settings.py`"),

@@ -53,7 +53,7 @@ kind, script, timing = sys.argv[1:4]
 sys.argv = [script, *sys.argv[4:]]
 t0 = time.perf_counter()
 if kind == "ours":
-    import ros_isolated_test.runner.ament.args
+    import ros_isolated_test.ament.args
 else:
     import ament_cmake_test, domain_coordinator
 t1 = time.perf_counter()

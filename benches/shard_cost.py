@@ -3,7 +3,7 @@
 A ctest RUNNER runs one test, so in a split each one reads the durations file and plans
 the workspace's tests to answer for its own. This measures,
 in fresh interpreters of this venv (bytecode cached, as under colcon), the RUNNER's own
-imports (``ros_isolated_test.runner.ament.args``) alone and then with
+imports (``ros_isolated_test.ament.args``) alone and then with
 ``shard.selection.select`` + ``runs`` + ``properties`` on top: by count (no file), and
 with durations files of 1,000 and 10,000 tests (about 30 KB and 300 KB). Wall time added
 over the imports alone, medians, interleaved; and, inside the process, where the time
@@ -27,7 +27,7 @@ from common import BOOTSTRAP_MARK, Context, Section, median, ms, progress, run_t
 
 from ros_isolated_test.shard.durations import measured, write
 
-BASELINE = "ros_isolated_test.runner.ament.args"
+BASELINE = "ros_isolated_test.ament.args"
 #: Tests in each durations file measured; 0: no file (by count).
 SIZES = (0, 1_000, 10_000)
 #: The target: what a 10,000-test file may add to a test, at most.

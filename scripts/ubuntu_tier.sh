@@ -27,7 +27,7 @@ modules=(
   tests/unit/cli/test_run_arguments.py
   tests/unit/cli/test_run.py
   tests/unit/cli/test_run_result_paths.py
-  tests/unit/runner/ament/test_run_test_isolated.py
+  tests/unit/ament/test_run_test_isolated.py
   tests/unit/pytest_plugin/test_plugin.py
   tests/unit/pytest_plugin/test_holding.py
   tests/unit/pytest_plugin/test_options.py

@@ -33,8 +33,8 @@ def cmake_include(colcon_defaults: bool, defaults_file: Path | None) -> None:
     printed, and the exit code is 1.
     Off: --cmake-args -DROS_ISOLATED_TEST_ALL=OFF, or -UCMAKE_PROJECT_INCLUDE to drop it.
     """  # noqa: D301 (click reads a backspace, not a backslash, as "keep these lines")
-    from ros_isolated_test.runner.ament import colcon_defaults as defaults
-    from ros_isolated_test.runner.ament import installed
+    from ros_isolated_test.ament import colcon_defaults as defaults
+    from ros_isolated_test.ament import installed
 
     if defaults_file is not None and not colcon_defaults:
         raise click.UsageError("FILE is the colcon defaults file of --colcon-defaults: add it")

@@ -15,6 +15,6 @@ def runner_path() -> None:
         OUTPUT_VARIABLE RUNNER OUTPUT_STRIP_TRAILING_WHITESPACE COMMAND_ERROR_IS_FATAL ANY)
       ament_add_test(my_test RUNNER "${RUNNER}" COMMAND ...)
     """  # noqa: D301 (click reads a backspace, not a backslash, as "keep these lines")
-    from ros_isolated_test.runner.ament import installed
+    from ros_isolated_test.ament import installed
 
     click.echo(str(installed.runner_script()))

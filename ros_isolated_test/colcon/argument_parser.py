@@ -58,7 +58,7 @@ def add_include(parsed: argparse.Namespace) -> None:
         logger.warning(problem)
     if not on:
         return
-    from ros_isolated_test.runner.ament import installed
+    from ros_isolated_test.ament import installed
 
     include = installed.cmake_include()
     if include is None:

@@ -358,7 +358,7 @@ def test_the_wheel_ships_every_cmake_file_as_share_data(wheel: Path) -> None:
     prefix = ".data/data/share/ros_isolated_test/cmake/"
     shipped = sorted(name.split(prefix, 1)[1] for name in names if prefix in name)
     assert shipped == sorted(p.name for p in CMAKE_FILES.glob("*.cmake")), names
-    assert "ros_isolated_test/runner/ament/run_test_isolated.py" in names, names
+    assert "ros_isolated_test/ament/run_test_isolated.py" in names, names
 
 
 def test_installed_from_the_wheel_cmake_finds_it_from_path_alone(
@@ -390,7 +390,7 @@ def test_installed_from_the_wheel_cmake_finds_it_from_path_alone(
     assert done.returncode == 0, done.stderr
     cache = (build / "CMakeCache.txt").read_text()
     assert f"ros_isolated_test_DIR:PATH={cmake_dir}" in cache.splitlines(), cache
-    runner = Path(site) / "ros_isolated_test" / "runner" / "ament" / "run_test_isolated.py"
+    runner = Path(site) / "ros_isolated_test" / "ament" / "run_test_isolated.py"
     assert f'"-u" "{runner}"' in (build / "CTestTestfile.cmake").read_text()
 
 

@@ -135,7 +135,7 @@ def test_the_wheel_alone_in_a_fresh_venv_gives_every_way_in(
     assert f"on {pool_id}" in ran.stdout.splitlines(), ran.stdout
 
     runner = _in_fresh_venv(installed, tmp_path, command, "runner-path").stdout.strip()
-    assert Path(runner) == package / "runner" / "ament" / "run_test_isolated.py"
+    assert Path(runner) == package / "ament" / "run_test_isolated.py"
     include = _in_fresh_venv(installed, tmp_path, command, "cmake-include").stdout.strip()
     assert Path(include).is_file() and Path(include).is_relative_to(installed), include
 

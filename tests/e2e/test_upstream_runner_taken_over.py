@@ -173,7 +173,7 @@ def test_configuring_counts_the_test_taken_over(workspace: Workspace, runner_scr
         for token, name in PACKAGES.items()
     }
     assert Path(runners[TAKEN]).name == Path(runner_script).name == "run_test_isolated.py"
-    assert runners[TAKEN].endswith("/ros_isolated_test/runner/ament/run_test_isolated.py")
+    assert runners[TAKEN].endswith("/ros_isolated_test/ament/run_test_isolated.py")
     assert runners[KEPT].endswith("/share/ament_cmake_ros/cmake/run_test_isolated.py"), runners
 
 
@@ -251,7 +251,7 @@ def test_upstreams_runner_pinned_by_env_or_append_env_is_kept_alike(
     upstream = runners["pinned_env"]
     assert upstream.endswith("/share/ament_cmake_ros/cmake/run_test_isolated.py"), runners
     assert runners["pinned_append"] == upstream, runners
-    assert runners["appended"].endswith("/ros_isolated_test/runner/ament/run_test_isolated.py")
+    assert runners["appended"].endswith("/ros_isolated_test/ament/run_test_isolated.py")
     said = workspace.build_log(TAKEN)
     (left_out,) = re.findall(r"ros_isolated_test: NOT isolated, .*$", said, re.MULTILINE)
     for test, keyword in (("pinned_env", "ENV"), ("pinned_append", "APPEND_ENV")):

@@ -783,7 +783,7 @@ def test_an_installed_wheel_prints_its_own_include(tmp_path: Path, env: dict[str
         tmp_path / "src", "find_package(ament_cmake REQUIRED)\nament_add_test(t COMMAND true)\n"
     )
     _configured(source, tmp_path / "build", installed, f"-DCMAKE_PROJECT_INCLUDE={expected}")
-    runner = Path(site) / "ros_isolated_test" / "runner" / "ament" / "run_test_isolated.py"
+    runner = Path(site) / "ros_isolated_test" / "ament" / "run_test_isolated.py"
     assert runners_of(tmp_path / "build" / "CTestTestfile.cmake") == {"t": str(runner)}
 
     # The wheel also has them in the package (setuptools' package data): the next place.

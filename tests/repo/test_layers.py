@@ -39,6 +39,7 @@ LAYERS = (
         "pytest_plugin": "pytest plugin",
         "colcon": "colcon extension",
     },
+    {"ament": "ament"},
     {"runner": "runner"},
     {"history": "history"},
     {"report": "report"},

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
+from ros_isolated_test.ament import installed
 from ros_isolated_test.colcon import argument_parser, project_include
-from ros_isolated_test.runner.ament import installed
 
 
 def _parsed(tmp_path: Path, verb: str = "build", **more: object) -> argparse.Namespace:

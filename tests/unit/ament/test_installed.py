@@ -1,4 +1,4 @@
-"""``runner.ament.installed``: where this installation keeps what CMake and colcon are pointed at.
+"""``ament.installed``: where this installation keeps what CMake and colcon are pointed at.
 
 ``runner-path`` prints the RUNNER script and ``cmake-include`` the CMake file that
 CMakeLists.txt files and colcon defaults then name, so each must be right for every way
@@ -17,11 +17,11 @@ from pathlib import Path
 import yaml  # type: ignore[import-untyped]
 from helpers.commands import REPO, run_process
 
-from ros_isolated_test.runner.ament import installed
+from ros_isolated_test.ament import installed
 
 #: Prints where the package it imports finds its CMake include and its RUNNER script.
 LOOK_UP = """
-from ros_isolated_test.runner.ament import installed
+from ros_isolated_test.ament import installed
 print(installed.cmake_include())
 print(installed.runner_script())
 """
@@ -51,7 +51,7 @@ def test_the_cmake_include_is_found_for_each_way_of_installing(tmp_path: Path) -
     # Neither installed nor in the package: None, for the CLI to say so.
     include, script = _look_up(package)
     assert include == "None"
-    assert script == package / "runner" / "ament" / "run_test_isolated.py"  # the copy's own
+    assert script == package / "ament" / "run_test_isolated.py"  # the copy's own
     # An editable install or a checkout: the package's own cmake/ folder.
     own = package / "cmake" / name
     own.parent.mkdir()

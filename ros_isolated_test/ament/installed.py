@@ -17,7 +17,7 @@ CMAKE_INCLUDE = Path("share/ros_isolated_test/cmake/ros_isolated_test_project_in
 
 def runner_script() -> Path:
     """The ctest RUNNER script (``run_test_isolated.py``), resolved."""
-    script = resources.files("ros_isolated_test.runner.ament") / "run_test_isolated.py"
+    script = resources.files("ros_isolated_test.ament") / "run_test_isolated.py"
     return Path(str(script)).resolve()
 
 

@@ -48,7 +48,7 @@ def _import_main() -> "Callable[[], int]":
     if sys.path and os.path.abspath(sys.path[0] or os.curdir) == here:
         del sys.path[0]
     try:
-        from ros_isolated_test.runner.ament.args import main
+        from ros_isolated_test.ament.args import main
     except ImportError as error:
         # ctest runs us with the Python CMake found, which may not be the one we are
         # installed for: run again with the Python of the `ros-isolated-test` command.

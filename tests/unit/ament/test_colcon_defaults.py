@@ -1,4 +1,4 @@
-"""``runner.ament.colcon_defaults``: the include added to a defaults file, every setting kept.
+"""``ament.colcon_defaults``: the include added to a defaults file, every setting kept.
 
 Each layout a defaults file is written in (block and flow style, JSON as action-ros-ci
 writes it, an empty or null ``build:``, comments, another installation's include) gets
@@ -21,8 +21,8 @@ from typing import Any
 import pytest
 import yaml  # type: ignore[import-untyped]
 
-from ros_isolated_test.runner.ament import colcon_defaults
-from ros_isolated_test.runner.ament.colcon_defaults import DefaultsError, add_include, add_to_file
+from ros_isolated_test.ament import colcon_defaults
+from ros_isolated_test.ament.colcon_defaults import DefaultsError, add_include, add_to_file
 
 INCLUDE = Path('/opt/a "quoted" dir: with # and/ros_isolated_test_project_include.cmake')
 ARGUMENT = f"-DCMAKE_PROJECT_INCLUDE={INCLUDE}"
@@ -150,7 +150,7 @@ def test_without_pyyaml_the_reason_names_it() -> None:
     code = (
         "import sys; sys.modules['yaml'] = None\n"
         "from pathlib import Path\n"
-        "from ros_isolated_test.runner.ament.colcon_defaults import add_include, DefaultsError\n"
+        "from ros_isolated_test.ament.colcon_defaults import add_include, DefaultsError\n"
         "try:\n    add_include('build: {}', Path('/x.cmake'))\n"
         "except DefaultsError as error:\n    print(error)\n"
     )

@@ -14,9 +14,9 @@ import pytest
 from helpers.commands import ament
 from helpers.results import load_result
 
+from ros_isolated_test.ament import args
+from ros_isolated_test.ament.args import UsageError, help_text, parse
 from ros_isolated_test.runner import settings
-from ros_isolated_test.runner.ament import args
-from ros_isolated_test.runner.ament.args import UsageError, help_text, parse
 
 
 def _env(argv: list[str]) -> list[tuple[str, str, bool]]:
