@@ -359,6 +359,8 @@ def test_the_wheel_ships_every_cmake_file_as_share_data(wheel: Path) -> None:
     shipped = sorted(name.split(prefix, 1)[1] for name in names if prefix in name)
     assert shipped == sorted(p.name for p in CMAKE_FILES.glob("*.cmake")), names
     assert "ros_isolated_test/ament/run_test_isolated.py" in names, names
+    # The old path, for workspaces configured before the script moved: it forwards.
+    assert "ros_isolated_test/runner/ament/run_test_isolated.py" in names, names
 
 
 def test_installed_from_the_wheel_cmake_finds_it_from_path_alone(

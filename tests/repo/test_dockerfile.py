@@ -418,6 +418,7 @@ def test_the_package_data_is_in_the_build_context(patterns: list[tuple[bool, lis
         "ros_isolated_test/py.typed",
         "ros_isolated_test/schemas/junit.xsd",
         "ros_isolated_test/ament/run_test_isolated.py",
+        "ros_isolated_test/runner/ament/run_test_isolated.py",
     ):
         assert (REPO / path).is_file(), path
         assert not is_ignored(path, patterns), path
