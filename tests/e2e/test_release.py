@@ -39,7 +39,7 @@ PYTHON_DEPENDS = ("python3-click", "python3-filelock", "python3-lxml")
 #: what a packager checks it with.
 SDIST_HOLDS = (
     "LICENSE", "CHANGELOG.rst", "README.md", "pyproject.toml", "setup.py", "package.xml",
-    "resource/ros_isolated_test", "docs/install.md", "colcon_test/test_installed.py",
+    "resource/ros_isolated_test", "docs/install.md", "install_check/test_installed.py",
     "tests/conftest.py", "tests/e2e/test_release.py", "scripts/package_deb.sh",
 )  # fmt: skip
 
