@@ -6,12 +6,11 @@ everything after ``--command`` is the test's command line, options included.
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ros_isolated_test.runner import exit_codes, session, settings, share
+from ros_isolated_test.runner import exit_codes, session, settings
 from ros_isolated_test.runner.request import EnvAssignment, Mode, RunRequest
 from ros_isolated_test.shard.spec import ShardSettingError
 
@@ -269,7 +268,7 @@ def parse(argv: Sequence[str]) -> RunRequest:
             env_origin="--env (ament_add_test ENV)",
             # The split from the environment only: ctest runs every test of a machine
             # with the same one (a test's ENV naming a share would split nothing).
-            shard=share.read(os.environ),
+            shard=settings.split(),
         )
     except (UsageError, settings.SettingsError, ShardSettingError) as error:
         # Only what the user can fix: any other error is a bug, and must show as one.

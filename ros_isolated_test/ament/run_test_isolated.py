@@ -144,6 +144,7 @@ def _not_run_document(
         "    <properties>",
         f'      <property name="command" value="{_xml(" ".join(command))}"/>',
         '      <property name="exit" value="not run"/>',
+        # names.RUNNER_VERSION, spelt out: this file imports nothing of the package here.
         *([f'      <property name="runner_version" value="{_xml(version)}"/>'] if version else []),
         "    </properties>",
         f'    <testcase classname="{suite}" name="{test}" time="0.000">',

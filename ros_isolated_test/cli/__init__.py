@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import sys
+import textwrap
 from pathlib import Path
 
 import click
 
-from ros_isolated_test import __version__
+from ros_isolated_test import __version__, names
 from ros_isolated_test.cli import (
     cmake_include,
     history,
@@ -19,41 +20,21 @@ from ros_isolated_test.cli import (
     status,
     usage,
 )
-from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
-from ros_isolated_test.runner.partition import OPT_OUT_ENV as GZ_PARTITION_ENV
-from ros_isolated_test.runner.settings import (
-    DISABLE_VAR,
-    DISCOVERY_RANGE_ENV,
-    ISOLATION_ENV,
-    LOCK_DIR_ENV,
-    MAX_RERUNS,
-    POOL_ENV,
-    RERUNS_ENV,
-    WAIT_TIMEOUT_ENV,
-)
-from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV
 
-ENVIRONMENT_HELP = f"""\b
-Environment:
-  {POOL_ENV}          domain IDs to hand out (e.g. 1-50,215-232); default 1-101,
-                                     less any whose DDS ports fall in the host's
-                                     net.ipv4.ip_local_port_range
-  {LOCK_DIR_ENV}         the lock directory shared by all runners on the machine
-  {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
-  {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
-  {RERUNS_ENV}           rerun a failed test up to N times, N <= {MAX_RERUNS} (run --rerun-failures)
-  {RESOURCES_ENV}        resources the test holds, e.g. cpu=2,mem=4G,gpu=1 (run --resources)
-  {CAPACITY_ENV}         what the machine has, e.g. cpu=8,mem=16G,gpu=1,sim=2; default:
-                                     the CPUs usable, MemTotal, 1 of anything else;
-                                     give every runner the same
-  {GZ_PARTITION_ENV}=off set no Gazebo partition (GZ_PARTITION, IGN_PARTITION)
-                                     per test, and refuse no preset one
-  {ISOLATION_ENV}=namespace|auto  the test's own network, /dev/shm and
-                                     IPC too, never waiting for an ID (run --isolation)
-  {DISABLE_VAR}=1                 run without reserving an ID (loudly)
-  {SHARD_ENV}=I/N        run only share I of N of the tests (run --shard)
-  {DURATIONS_ENV}=FILE   the durations file (absolute) the split balances by
-"""
+
+def _environment_help() -> str:
+    """The group's epilog: each variable of ours from the registry, its meaning beneath it."""
+    lines = ["\b", "Environment:"]
+    for entry in names.ENVIRONMENT:
+        if entry.name.startswith("ROS_ISOLATED_TEST_") or entry.name == names.DISABLE:
+            lines.append(f"  {entry.name}")
+            lines.extend(
+                textwrap.wrap(entry.meaning, 92, initial_indent=" " * 6, subsequent_indent=" " * 6)
+            )
+    return "\n".join(lines) + "\n"
+
+
+ENVIRONMENT_HELP = _environment_help()
 
 
 #: ``--version``: which copy answers and on which Python, for bug reports and for a machine

@@ -7,7 +7,6 @@ command group by ``cli/__init__.py`` (``cli.add_command``), like ``shard``.
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -69,7 +68,8 @@ def report(
     set, only that share is expected.
     """
     from ros_isolated_test.report import shards, text_report, tree
-    from ros_isolated_test.shard.spec import ShardSettingError, share_from
+    from ros_isolated_test.runner import settings
+    from ros_isolated_test.shard.spec import ShardSettingError
 
     if not paths:
         default = Path("build")
@@ -84,7 +84,7 @@ def report(
         _write_durations(paths, durations_file)
         return
     try:
-        split = shards.Split(share_from(os.environ))
+        split = shards.Split(settings.machine_share())
     except ShardSettingError as error:
         usage.fail(str(error), usage.USAGE)
     # A folder it cannot read is an error; a flaky case (passed after failing) is listed

@@ -7,7 +7,6 @@ reads it learns why nothing ran.
 from __future__ import annotations
 
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -16,7 +15,7 @@ import click
 from ros_isolated_test.cli import usage
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
 from ros_isolated_test.process.supervisor import KILL_GRACE
-from ros_isolated_test.runner import session, settings, share
+from ros_isolated_test.runner import session, settings
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.settings import (
     DEFAULT_WAIT_TIMEOUT,
@@ -217,7 +216,7 @@ def run(
             resources=resources,
             isolation=isolation,
         )
-        split = share.read(os.environ, shard)
+        split = settings.split(shard)
         request = RunRequest(
             command=command,
             mode=Mode.SHELL,

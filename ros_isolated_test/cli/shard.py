@@ -8,7 +8,6 @@ Added to the command group by ``cli/__init__.py`` (``cli.add_command``).
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import click
@@ -51,13 +50,14 @@ def shard(
     file's median. Without a durations file the split is by count: by that hash alone.
     Exits 2 when the durations file cannot be read.
     """
-    from ros_isolated_test.shard import durations, plan, selection, view
+    from ros_isolated_test.runner import settings
+    from ros_isolated_test.shard import durations, plan, view
     from ros_isolated_test.shard.spec import ShardSettingError
 
     if not show_plan:
         raise click.UsageError("say what to show: --plan (each share's tests)")
     try:
-        named = selection.durations_file(os.environ, durations_file)
+        named = settings.durations_file(durations_file)
         if named is None and not trees:
             raise click.UsageError("nothing to plan: give --durations FILE, or result trees (TREE)")
         loaded = None if named is None else durations.load(*named)

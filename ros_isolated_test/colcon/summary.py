@@ -16,7 +16,7 @@ from pathlib import Path
 from ros_isolated_test.report import html_report
 from ros_isolated_test.report.shards import Split
 from ros_isolated_test.report.tree import FileRead
-from ros_isolated_test.shard.spec import ShardSettingError, share_from
+from ros_isolated_test.shard.spec import ShardSettingError
 
 #: The page's name in the run's log folder.
 PAGE = "ros_isolated_test.html"
@@ -47,8 +47,10 @@ def result_paths(bases: Iterable[Path]) -> list[Path]:
 
 def summarise(paths: list[Path], log_path: Path | None, environ: Mapping[str, str]) -> str:
     """Write the page (when colcon logs) and return the one line that names it."""
+    from ros_isolated_test.runner import settings
+
     try:
-        share = share_from(environ)
+        share = settings.machine_share(environ)
     except ShardSettingError as error:
         return f"{PREFIX} no summary: {error}"
     split = Split(share)

@@ -12,7 +12,9 @@ import stat
 from collections.abc import Mapping
 from pathlib import Path
 
-LOCK_DIR_ENV = "ROS_ISOLATED_TEST_LOCK_DIR"
+from ros_isolated_test import names
+
+LOCK_DIR_ENV = names.LOCK_DIR
 DEFAULT_DIR_NAME = "ros-isolated-test-domains"
 #: Like /tmp: everyone may create lock files, nobody may delete another user's.
 SHARED_DIR_MODE = 0o1777

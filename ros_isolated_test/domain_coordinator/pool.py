@@ -8,7 +8,9 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Mapping, Sequence
 
-POOL_ENV = "ROS_ISOLATED_TEST_DOMAINS"
+from ros_isolated_test import names
+
+POOL_ENV = names.DOMAINS
 DEFAULT_SPEC = "1-101"
 #: Fast DDS computes ports from the ID; from 233 up node creation kills the process.
 HIGHEST_VALID_ID = 232

@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import os
 
+from ros_isolated_test import names
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-RESOURCES_ENV = "ROS_ISOLATED_TEST_RESOURCES"
-CAPACITY_ENV = "ROS_ISOLATED_TEST_CAPACITY"
+RESOURCES_ENV = names.RESOURCES
+CAPACITY_ENV = names.CAPACITY
 CPU = "cpu"
 MEM = "mem"
 #: Longest resource name: names land in file records and in every status line.

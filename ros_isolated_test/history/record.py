@@ -23,7 +23,7 @@ import sqlite3
 from datetime import datetime, timezone
 from pathlib import Path
 
-from ros_isolated_test import __version__
+from ros_isolated_test import __version__, names
 from ros_isolated_test.history.store import StoreError, connect, problem, prune, stored
 from ros_isolated_test.report.measured import named_tests
 from ros_isolated_test.report.tree import FileRead, read_tree
@@ -82,8 +82,8 @@ class Run:
         self.host = self.host or read.suites[0].attrs.get("hostname", "")
         self.shard = self.shard or properties.get("shard", "")
         self.plan = self.plan or properties.get("shard_plan", "")
-        self.version = self.version or properties.get("runner_version", "")
-        if len(read.suites) == 1 and "runner_version" in properties:
+        self.version = self.version or properties.get(names.RUNNER_VERSION, "")
+        if len(read.suites) == 1 and names.RUNNER_VERSION in properties:
             for name, seconds in named_tests(item):
                 self.tests[name] = _runner_attempts(item, seconds)
                 self.starts[name] = properties.get(

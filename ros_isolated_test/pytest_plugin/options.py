@@ -9,9 +9,12 @@ inside a ROS package (a package.xml at or above the rootdir or the test paths).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+
+from ros_isolated_test import names
 
 INI = "ros_isolation"
 #: The session's request of machine resources: the ini option and its command-line twin.
@@ -23,6 +26,16 @@ SHARD_OPTION = "--ros-isolated-test-shard"
 _NO_TEST_OPTIONS = ("help", "markers", "showfixtures", "show_fixtures_per_test", "collectonly")
 #: The session's package.xml, found once (:func:`manifest`).
 _MANIFEST: pytest.StashKey[Path | None] = pytest.StashKey()
+
+
+def split_asked(config: pytest.Config) -> tuple[bool, str | None]:
+    """Whether the session is asked to split, and its option's value (None: not given).
+
+    ``ROS_ISOLATED_TEST_SHARD`` is read here, outside ``runner.settings``, because every
+    pytest run asks and only a split may load the runner; its value is parsed there.
+    """
+    option: str | None = config.getoption("ros_isolated_test_shard")
+    return option is not None or bool(os.environ.get(names.SHARD, "").strip()), option
 
 
 def add(parser: pytest.Parser) -> None:

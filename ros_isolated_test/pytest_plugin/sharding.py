@@ -38,8 +38,9 @@ import pytest
 
 from ros_isolated_test import __version__
 from ros_isolated_test.pytest_plugin.options import SHARD_OPTION as OPTION
+from ros_isolated_test.pytest_plugin.options import split_asked
 from ros_isolated_test.shard.identity import PROPERTY, SECONDS_PROPERTY, identity
-from ros_isolated_test.shard.spec import SHARD_ENV, ShardSettingError
+from ros_isolated_test.shard.spec import ShardSettingError
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -80,10 +81,10 @@ def decide(config: pytest.Config, active: bool) -> Sharding | None:
     """
     if config.getoption("help", False):
         return None
-    option: str | None = config.getoption("ros_isolated_test_shard")
-    asked = option is not None or bool(os.environ.get(SHARD_ENV, "").strip())
+    asked, option = split_asked(config)
     if not asked and not active:
         return None
+    from ros_isolated_test.runner import settings
     from ros_isolated_test.runner.environment import held_for_us
 
     package = package_name(config)
@@ -97,10 +98,8 @@ def decide(config: pytest.Config, active: bool) -> Sharding | None:
         return sharding
     selection = None
     if asked:
-        from ros_isolated_test.shard.selection import select
-
         try:
-            selection = select(os.environ, option, shard_origin=OPTION)
+            selection = settings.split(option, OPTION)
         except ShardSettingError as error:
             raise pytest.UsageError(f"ros-isolated-test: {error}") from None
     sharding = Sharding(selection, package, named=True)

@@ -16,7 +16,7 @@ from html import escape
 from pathlib import Path
 from typing import IO
 
-from ros_isolated_test import __version__
+from ros_isolated_test import __version__, names
 from ros_isolated_test.report import html_assets
 from ros_isolated_test.report.bounded_values import local
 from ros_isolated_test.report.counts import FileReport
@@ -37,7 +37,7 @@ FACTS: tuple[tuple[str, str | None, str | None], ...] = (
     ("domain pool", DOMAIN_POOL, "no ID held"),
     ("capacity", "capacity", None),
     ("discovery range", "ros_discovery_range", "not recorded (isolation off)"),
-    ("runner version", "runner_version", "not recorded"),
+    ("runner version", names.RUNNER_VERSION, "not recorded"),
 )
 
 

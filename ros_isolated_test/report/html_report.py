@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
+from ros_isolated_test import names
 from ros_isolated_test.atomic_file import NotReplaceableError, discards, special_kind
 from ros_isolated_test.report import html_timeline
 from ros_isolated_test.report.bounded_values import Reading, drawable
@@ -124,7 +125,7 @@ def _add(page: Page, item: FileRead, number: int) -> None:
     page.files += 1
     suite = read.suites[0] if read.suites else None
     properties = suite.properties if suite is not None else {}
-    ours = "runner_version" in properties and len(read.suites) == 1
+    ours = names.RUNNER_VERSION in properties and len(read.suites) == 1
     page.foreign += not ours
     test = suite.name if ours and suite is not None and suite.name else test_name_of(item.path)
     package = _package_of(item.path, test, ours)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+from ros_isolated_test import names
 from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.shard.durations import Durations, measured, merge
 from ros_isolated_test.shard.identity import SEPARATOR, IdentityError, identity, split
@@ -36,7 +37,7 @@ if TYPE_CHECKING:
     from ros_isolated_test.xunit.model import Case
 
 #: The suite property a runner records its test's run time in (``runner.verdict``).
-DURATION_PROPERTY = "duration"
+DURATION_PROPERTY = names.DURATION
 
 __all__ = ["Gathered", "named_tests"]
 
@@ -56,7 +57,7 @@ def named_tests(item: FileRead) -> list[tuple[str, float | None]]:
     if read is None:
         return []
     suites = read.suites
-    if len(suites) == 1 and "runner_version" in suites[0].properties:
+    if len(suites) == 1 and names.RUNNER_VERSION in suites[0].properties:
         return _runner_test(item)
     found: list[tuple[str, float | None]] = []
     for case in read.cases:

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from ros_isolated_test import names
+
 RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 LOCALHOST_ONLY_VAR = "ROS_LOCALHOST_ONLY"
 PEERS_VAR = "ROS_STATIC_PEERS"
-OVERRIDE_ENV = "ROS_ISOLATED_TEST_DISCOVERY_RANGE"
+OVERRIDE_ENV = names.DISCOVERY_RANGE
 OVERRIDE_ORIGIN = f"--discovery-range / {OVERRIDE_ENV}"
 RANGES = ("LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT")
 DEFAULT_RANGE = "LOCALHOST"

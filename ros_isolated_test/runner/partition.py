@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 
+from ros_isolated_test import names
 from ros_isolated_test.switches import NotOnOff, on_off
 from ros_isolated_test.text import bounded
 
@@ -25,9 +26,9 @@ GZ_VAR = "GZ_PARTITION"
 IGN_VAR = "IGN_PARTITION"
 VARIABLES = (GZ_VAR, IGN_VAR)
 #: The one switch: ``off`` sets no partition variable (and refuses no preset one).
-OPT_OUT_ENV = "ROS_ISOLATED_TEST_GZ_PARTITION"
+OPT_OUT_ENV = names.GZ_PARTITION_SWITCH
 #: The suite property naming the partition.
-PROPERTY = "gz_partition"
+PROPERTY = names.GZ_PARTITION
 
 #: What every Gazebo release accepts in a partition (``/`` and ``@`` are not safe).
 _SAFE = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")

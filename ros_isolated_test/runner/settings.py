@@ -7,6 +7,14 @@ has one parser, one error message and one meaning everywhere. An option given on
 command line wins over its variable, and the variable is then not read at all. Entry
 points that never rerun (``status``, the pytest plugin) pass ``reruns=0`` for that
 reason: a bad ROS_ISOLATED_TEST_RERUNS exported for ``run`` must not break them.
+
+A split's variables (``ROS_ISOLATED_TEST_SHARD``, ``ROS_ISOLATED_TEST_DURATIONS``) are
+read here too (:func:`split`, :func:`machine_share`, :func:`durations_file`), for every
+entry point: ``run``, the RUNNER, ``report``, ``shard``, the pytest plugin and the colcon
+summary. The ``shard`` package parses what it is handed and reads no variable itself.
+One exception: the pytest plugin's ``options.split_asked`` looks whether
+``ROS_ISOLATED_TEST_SHARD`` is set at all, since every pytest run asks and only a split
+may load the runner; the value is still parsed here (:func:`split`).
 """
 
 from __future__ import annotations
@@ -15,6 +23,7 @@ import math
 import os
 from pathlib import Path
 
+from ros_isolated_test import names
 from ros_isolated_test.domain_coordinator.lock_dir import LOCK_DIR_ENV, lock_dir_from_env
 from ros_isolated_test.domain_coordinator.pool import (
     LINUX_DEFAULT_PORT_RANGE,
@@ -38,23 +47,26 @@ TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-WAIT_TIMEOUT_ENV = "ROS_ISOLATED_TEST_WAIT_TIMEOUT"
+    from ros_isolated_test.shard.selection import Selection
+    from ros_isolated_test.shard.spec import Share
+
+WAIT_TIMEOUT_ENV = names.WAIT_TIMEOUT
 DEFAULT_WAIT_TIMEOUT = 600.0
 DISCOVERY_RANGE_ENV = discovery.OVERRIDE_ENV
 #: How many times a failed test runs again (``run --rerun-failures``; CMake's ``RERUNS``).
-RERUNS_ENV = "ROS_ISOLATED_TEST_RERUNS"
+RERUNS_ENV = names.RERUNS
 #: The most reruns allowed: every attempt's result is kept in memory until the merge, and
 #: a flake that needs more than this is a failure to fix, not to retry.
 MAX_RERUNS = 100
-DISABLE_VAR = "DISABLE_ROS_ISOLATION"
+DISABLE_VAR = names.DISABLE
 #: How a test is kept apart (``run --isolation``; the RUNNER also reads it from ``--env``).
-ISOLATION_ENV = "ROS_ISOLATED_TEST_ISOLATION"
+ISOLATION_ENV = names.ISOLATION
 #: ``domain``: a reserved ROS_DOMAIN_ID (the default); ``namespace``: Linux namespaces of
 #: the test's own too, no waiting for an ID; ``auto``: namespace where allowed, else domain.
 ISOLATION_MODES = ("domain", "namespace", "auto")
 DEFAULT_ISOLATION = "domain"
 #: The test history database that ``run`` and the pytest plugin record into (``history``).
-HISTORY_ENV = "ROS_ISOLATED_TEST_HISTORY"
+HISTORY_ENV = names.HISTORY
 
 __all__ = [
     "CAPACITY_ENV",
@@ -163,6 +175,50 @@ def history_database(environ: Mapping[str, str] | None = None) -> Path | None:
     """The history database ``ROS_ISOLATED_TEST_HISTORY`` names; None when unset or empty."""
     value = (os.environ if environ is None else environ).get(HISTORY_ENV, "")
     return Path(value) if value else None
+
+
+def split(
+    option: str | None = None,
+    origin: str = "--shard",
+    environ: Mapping[str, str] | None = None,
+) -> Selection | None:
+    """The split an entry point runs under; None: no split, and nothing of it loaded.
+
+    From ``option`` (given as ``origin``), else ``ROS_ISOLATED_TEST_SHARD``, balanced by
+    ``ROS_ISOLATED_TEST_DURATIONS``. Raises
+    :class:`~ros_isolated_test.shard.spec.ShardSettingError` (one line naming the
+    variable or option) for a bad share or durations file.
+    """
+    environ = os.environ if environ is None else environ
+    if not split_asked(option, environ):
+        return None
+    from ros_isolated_test.shard.selection import select
+
+    return select(environ, option, shard_origin=origin)
+
+
+def split_asked(option: str | None = None, environ: Mapping[str, str] | None = None) -> bool:
+    """Whether a split is asked for, by ``option`` or ``ROS_ISOLATED_TEST_SHARD`` (not blank)."""
+    environ = os.environ if environ is None else environ
+    return option is not None or bool(environ.get(names.SHARD, "").strip())
+
+
+def machine_share(environ: Mapping[str, str] | None = None) -> Share | None:
+    """The share ``ROS_ISOLATED_TEST_SHARD`` gives this machine (a report expects it alone)."""
+    from ros_isolated_test.shard.spec import share_from
+
+    return share_from(os.environ if environ is None else environ)
+
+
+def durations_file(
+    option: str | None = None,
+    origin: str = "--durations",
+    environ: Mapping[str, str] | None = None,
+) -> tuple[Path, str] | None:
+    """The durations file named: ``option``, else ``ROS_ISOLATED_TEST_DURATIONS``; by what."""
+    from ros_isolated_test.shard import selection
+
+    return selection.durations_file(os.environ if environ is None else environ, option, origin)
 
 
 def disables_isolation(value: str | None) -> bool:

@@ -1,7 +1,7 @@
 """A split's step of the run: a test of another share is not run here, this share's is recorded.
 
 Decided first, before anything is reserved or written (``ROS_ISOLATED_TEST_SHARD``, read
-by the entry point into ``RunRequest.shard``). A test of another share leaves no result
+by ``settings.split`` into ``RunRequest.shard``). A test of another share leaves no result
 file, so the merge of the machines' trees counts it once, where it ran: a stale one of
 an earlier run here (a build folder restored from a cache) is removed. It says so in
 one line and exits with the test's own skip code (``--skip-return-code N``; ``0`` with
@@ -25,34 +25,16 @@ from ros_isolated_test import __version__
 from ros_isolated_test.runner import exit_codes, streams
 from ros_isolated_test.runner.request import Mode
 from ros_isolated_test.shard import record
-from ros_isolated_test.shard.spec import SHARD_ENV
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
-    from collections.abc import Mapping
     from typing import BinaryIO
 
     from ros_isolated_test.runner.request import RunRequest
     from ros_isolated_test.shard.selection import Selection
     from ros_isolated_test.xunit.result_file import ResultFile
 
-__all__ = ["decide", "exit_code", "read"]
-
-
-def read(
-    environ: Mapping[str, str], option: str | None = None, origin: str = "--shard"
-) -> Selection | None:
-    """The split an entry point runs under; None: no split, and nothing of it loaded.
-
-    From ``option`` (given as ``origin``), else ``ROS_ISOLATED_TEST_SHARD``. Raises
-    :class:`~ros_isolated_test.shard.spec.ShardSettingError` (one line naming the
-    variable or option) for a bad share or durations file.
-    """
-    if option is None and not environ.get(SHARD_ENV, "").strip():
-        return None
-    from ros_isolated_test.shard.selection import select
-
-    return select(environ, option, shard_origin=origin)
+__all__ = ["decide", "exit_code"]
 
 
 def decide(request: RunRequest, result: ResultFile, console: BinaryIO) -> int | None:

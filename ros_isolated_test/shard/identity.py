@@ -16,17 +16,18 @@ Python and every process draws the same share (``hash()`` is salted per process)
 
 from __future__ import annotations
 
+from ros_isolated_test import names
 from ros_isolated_test.shard.digest import sha256
 from ros_isolated_test.shard.spec import ShardSettingError, named
 
 SEPARATOR = "/"
 #: The testcase property a pytest item's identity is recorded under in pytest's
 #: ``--junit-xml`` file (the plugin adds it), so ``report --durations`` can name the item.
-PROPERTY = "ros_isolated_test_identity"
+PROPERTY = names.IDENTITY
 #: The testcase property the plugin records the item's run time under beside it, in
 #: seconds to the microsecond: pytest's own ``time`` has three decimals, so a quicker
 #: item would read as 0 s.
-SECONDS_PROPERTY = "ros_isolated_test_seconds"
+SECONDS_PROPERTY = names.SECONDS
 
 __all__ = [
     "PROPERTY",

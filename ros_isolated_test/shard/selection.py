@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ros_isolated_test import names
 from ros_isolated_test.shard.durations import DURATIONS_ENV, Durations, load
 from ros_isolated_test.shard.identity import identity
 from ros_isolated_test.shard.plan import Plan
@@ -26,8 +27,8 @@ if TYPE_CHECKING:
 #: The plan's name in results when there is no durations file.
 BY_COUNT = "count"
 #: The result-file properties a share is recorded under.
-SHARD_PROPERTY = "shard"
-PLAN_PROPERTY = "shard_plan"
+SHARD_PROPERTY = names.SHARD_PROPERTY
+PLAN_PROPERTY = names.SHARD_PLAN
 
 __all__ = [
     "BY_COUNT",

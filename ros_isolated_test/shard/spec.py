@@ -15,14 +15,16 @@ or option, the value and the fix, in one line: a typo must never run the wrong t
 
 from __future__ import annotations
 
+from ros_isolated_test import names
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-SHARD_ENV = "ROS_ISOLATED_TEST_SHARD"
+SHARD_ENV = names.SHARD
 #: The durations file the split balances by (``shard.durations`` reads it); named here,
 #: beside the share, so what only needs the names loads nothing more.
-DURATIONS_ENV = "ROS_ISOLATED_TEST_DURATIONS"
+DURATIONS_ENV = names.DURATIONS
 #: The most shares one split may have.
 MAX_TOTAL = 1000
 #: What a value must look like, said in every error.

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import re
 
+from ros_isolated_test import names
 from ros_isolated_test.xunit.gitlab import distinct_gitlab_keys
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 
@@ -20,12 +21,12 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
 
 #: Suite property: how many attempts ran.
-ATTEMPTS_PROPERTY = "attempts"
+ATTEMPTS_PROPERTY = names.ATTEMPTS
 #: Suite property: how many cases passed after failing at least once (flaky, as ``report``
 #: counts it; a case skipped after failing is a skip).
-FLAKY_PROPERTY = "flaky_cases"
+FLAKY_PROPERTY = names.FLAKY_CASES
 #: Suite property: which cases were renamed so no two share a GitLab key (if any were).
-RENAMED_PROPERTY = "renamed_cases"
+RENAMED_PROPERTY = names.RENAMED_CASES
 #: Earlier attempts kept per case: the oldest half and the newest half, the middle counted.
 ATTEMPTS_KEPT = 10
 #: Characters kept of each attempt's message, text, system-out and system-err: the final

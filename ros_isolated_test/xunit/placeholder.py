@@ -20,6 +20,7 @@ import errno
 import os
 import stat
 
+from ros_isolated_test import names
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import serialise
 from ros_isolated_test.xunit.kept_files import attempt_original_of
@@ -53,12 +54,12 @@ _STAND_IN_PROPERTIES = (
 KILLED = "the runner was killed before the test ended"
 #: The placeholder's suite property: when it was written (local ISO 8601 to the
 #: microsecond, with the zone), just before its attempt waited for an ID and started.
-WRITTEN_AT = "placeholder_written_at"
+WRITTEN_AT = names.PLACEHOLDER_WRITTEN_AT
 #: How far the placeholder file's mtime may be from :data:`WRITTEN_AT` for the mtimes
 #: beside it to be the run's own (a copy that did not keep them moves them all).
 _SAME_INSTANT = 2.0
 #: Suite property of a merged rerun series: how many attempts it holds (``attempts``).
-_ATTEMPTS = "attempts"
+_ATTEMPTS = names.ATTEMPTS
 
 
 def stamped(properties: Mapping[str, str], when: float) -> dict[str, str]:

@@ -30,6 +30,7 @@ import sys
 import time
 from pathlib import Path
 
+from ros_isolated_test import names
 from ros_isolated_test.atomic_file import (
     SPECIAL_FIX,
     NotReplaceableError,
@@ -54,7 +55,7 @@ if TYPE_CHECKING:
 
 NO_RESULT = "The test did not generate a result file."
 #: The suite property of a test that wrote the result path itself (``in_place``).
-IN_PLACE_PROPERTY = "result_file_in_place"
+IN_PLACE_PROPERTY = names.RESULT_FILE_IN_PLACE
 _SPACE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 

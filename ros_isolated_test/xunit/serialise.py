@@ -12,7 +12,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-from ros_isolated_test import __version__
+from ros_isolated_test import __version__, names
 from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT, attempt_count, kept
 from ros_isolated_test.xunit.gitlab import written_type
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
@@ -175,7 +175,7 @@ def serialize(suite: Suite) -> bytes:
         + ">\n",
         "    <properties>\n",
     ]
-    for key, value in {**suite.properties, "runner_version": __version__}.items():
+    for key, value in {**suite.properties, names.RUNNER_VERSION: __version__}.items():
         pair = (("name", name_token(key, "property")), ("value", xml_safe(value, 4096)))
         lines.append(f"      {_start('property', pair)}/>\n")
     lines.append("    </properties>\n")

@@ -9,15 +9,17 @@ from __future__ import annotations
 
 import time
 
+from ros_isolated_test import names
+
 #: Suite properties the report's timeline draws from (one set per attempt; a rerun's
 #: earlier ones as ``attempt_<k>.<name>``): when the command started and ended (local
 #: ISO 8601 to the microsecond, with the zone), the seconds waited before it for an ID
 #: and for the resources asked for, and the pool the ID came from.
-STARTED_AT = "started_at"
-ENDED_AT = "ended_at"
-WAIT_DOMAIN = "wait_domain_seconds"
-WAIT_RESOURCES = "wait_resources_seconds"
-DOMAIN_POOL = "domain_pool"
+STARTED_AT = names.STARTED_AT
+ENDED_AT = names.ENDED_AT
+WAIT_DOMAIN = names.WAIT_DOMAIN
+WAIT_RESOURCES = names.WAIT_RESOURCES
+DOMAIN_POOL = names.DOMAIN_POOL
 
 
 def instant(when: float) -> str:

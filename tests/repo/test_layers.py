@@ -49,6 +49,7 @@ LAYERS = (
     {
         "": "bottom",
         "atomic_file": "bottom",
+        "names": "bottom",
         "schemas": "bottom",
         "switches": "bottom",
         "text": "bottom",
