@@ -10,9 +10,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ros_isolated_test import not_run
 from ros_isolated_test.runner import exit_codes, session, settings
 from ros_isolated_test.runner.request import EnvAssignment, Mode, RunRequest
-from ros_isolated_test.shard.spec import ShardSettingError
 
 PROG = "run_test_isolated.py"
 DESCRIPTION = (
@@ -67,7 +67,7 @@ OPTIONS: tuple[tuple[str, str | None, bool, str], ...] = (
 )
 
 
-class UsageError(Exception):
+class UsageError(not_run.NotRun):
     """The arguments cannot be understood; ``result_file`` is set if it could be found."""
 
     def __init__(self, message: str, result_file: Path | None = None) -> None:
@@ -270,7 +270,7 @@ def parse(argv: Sequence[str]) -> RunRequest:
             # with the same one (a test's ENV naming a share would split nothing).
             shard=settings.split(),
         )
-    except (UsageError, settings.SettingsError, ShardSettingError) as error:
+    except not_run.NotRun as error:
         # Only what the user can fix: any other error is a bug, and must show as one.
         raise UsageError(str(error), result_file) from None
 

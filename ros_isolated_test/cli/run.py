@@ -14,6 +14,7 @@ import click
 
 from ros_isolated_test.cli import usage
 from ros_isolated_test.domain_coordinator.resources import CAPACITY_ENV, RESOURCES_ENV
+from ros_isolated_test.not_run import NotRun
 from ros_isolated_test.process.supervisor import KILL_GRACE
 from ros_isolated_test.runner import session, settings
 from ros_isolated_test.runner.request import Mode, RunRequest
@@ -25,7 +26,7 @@ from ros_isolated_test.runner.settings import (
     RERUNS_ENV,
     WAIT_TIMEOUT_ENV,
 )
-from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV, ShardSettingError
+from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV
 
 EXIT_CODES_HELP = """\b
 Exit codes:
@@ -229,6 +230,6 @@ def run(
             settings=config,
             shard=split,
         )
-    except (settings.SettingsError, ShardSettingError) as error:
+    except NotRun as error:
         sys.exit(session.report_usage_error(str(error), junit_xml))
     sys.exit(session.run(request))

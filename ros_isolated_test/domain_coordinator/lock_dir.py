@@ -12,7 +12,7 @@ import stat
 from collections.abc import Mapping
 from pathlib import Path
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 
 LOCK_DIR_ENV = names.LOCK_DIR
 DEFAULT_DIR_NAME = "ros-isolated-test-domains"
@@ -25,8 +25,10 @@ LOCK_FILE_MODE = 0o666
 _DIRECTORY_ERRORS = frozenset({errno.ENOSPC, errno.EROFS, errno.EDQUOT, errno.EACCES})
 
 
-class LockDirError(RuntimeError):
+class LockDirError(not_run.NotRun, RuntimeError):
     """The lock directory cannot be used; the message names the path and the fix."""
+
+    reason = not_run.BUSY  # as for no ID: the runners' shared place cannot be had
 
 
 class UnusableLockFile(Exception):

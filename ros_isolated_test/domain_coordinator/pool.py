@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Mapping, Sequence
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 
 POOL_ENV = names.DOMAINS
 DEFAULT_SPEC = "1-101"
@@ -22,7 +22,7 @@ def _number(text: str) -> int | None:
     return int(text) if text.isascii() and text.isdigit() else None
 
 
-class PoolSpecError(ValueError):
+class PoolSpecError(not_run.NotRun, ValueError):
     """The pool spec cannot be used; the message says why and how to fix it."""
 
 

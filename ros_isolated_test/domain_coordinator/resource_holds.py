@@ -28,6 +28,7 @@ import os
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
+from ros_isolated_test import not_run
 from ros_isolated_test.atomic_file import write_atomically
 from ros_isolated_test.domain_coordinator import records
 from ros_isolated_test.domain_coordinator.flock import try_lock
@@ -69,7 +70,7 @@ __all__ = [
 ]
 
 
-class CapacityConflictError(RuntimeError):
+class CapacityConflictError(not_run.NotRun, RuntimeError):
     """Runners disagree on a capacity: the message names both and the fix."""
 
 

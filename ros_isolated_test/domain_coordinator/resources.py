@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -47,7 +47,7 @@ __all__ = [
 ]
 
 
-class ResourceSpecError(ValueError):
+class ResourceSpecError(not_run.NotRun, ValueError):
     """A request or capacity that cannot be used: one line naming it and the fix."""
 
 

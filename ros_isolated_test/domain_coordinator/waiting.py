@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from ros_isolated_test import not_run
 from ros_isolated_test.domain_coordinator import resource_holds
 from ros_isolated_test.domain_coordinator.lock_dir import ensure_lock_dir
 from ros_isolated_test.domain_coordinator.queue import RESOURCE_MARK, Queue
@@ -36,8 +37,10 @@ if TYPE_CHECKING:
     TakenT = TypeVar("TakenT", bound=Taken)
 
 
-class PoolExhaustedError(RuntimeError):
+class PoolExhaustedError(not_run.NotRun, RuntimeError):
     """No ID became free in time; the message says who holds them and what to do."""
+
+    reason = not_run.BUSY
 
 
 class ResourcesBusyError(PoolExhaustedError):

@@ -53,13 +53,10 @@ class State:
 
 def isolate(config: pytest.Config, state: State, explicit: bool, controller: bool) -> None:
     """The runner's decision, then (but in the xdist controller, which runs no test) its ID."""
-    from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
-    from ros_isolated_test.domain_coordinator.resource_holds import CapacityConflictError
-    from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
+    from ros_isolated_test.not_run import NotRun
     from ros_isolated_test.process.namespace import NamespaceError
     from ros_isolated_test.process.supervisor import KILL_GRACE
-    from ros_isolated_test.runner import environment, settings, summary
-    from ros_isolated_test.runner.discovery import DiscoveryError
+    from ros_isolated_test.runner import environment, exit_codes, settings, summary
     from ros_isolated_test.runner.isolation import isolation
 
     environ = os.environ
@@ -82,7 +79,7 @@ def isolate(config: pytest.Config, state: State, explicit: bool, controller: boo
             raise pytest.UsageError(f"ros-isolated-test: {refusal}") from None
         _left_alone(state, refusal.variable)
         return
-    except (settings.SettingsError, DiscoveryError) as error:
+    except NotRun as error:  # a bad setting, a discovery that cannot be had
         raise pytest.UsageError(f"ros-isolated-test: {error}") from None
     if not policy.isolate and not config_settings.resources:
         lines, properties = summary.summary(policy, None)
@@ -100,7 +97,9 @@ def isolate(config: pytest.Config, state: State, explicit: bool, controller: boo
         held = state.stack.enter_context(
             isolation(policy, config_settings, command, note, KILL_GRACE)
         )
-    except (PoolExhaustedError, LockDirError, CapacityConflictError) as error:
+    except NotRun as error:
+        if exit_codes.plugin_code(error) != NO_ID_EXIT:  # capacities that disagree
+            raise pytest.UsageError(f"ros-isolated-test: {error}") from None
         state.error = f"ros-isolated-test: error: {error}"
         if worker:
             return  # said to the controller (pytest_collection): a crash would be restarted

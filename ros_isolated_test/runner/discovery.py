@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 
 RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 LOCALHOST_ONLY_VAR = "ROS_LOCALHOST_ONLY"
@@ -23,7 +23,7 @@ DEFAULT_RANGE = "LOCALHOST"
 _LOCALHOST_ONLY_DISTROS = frozenset({"foxy", "galactic", "humble"})
 
 
-class DiscoveryError(ValueError):
+class DiscoveryError(not_run.NotRun, ValueError):
     """A range that cannot be used; the message names it and the choices."""
 
 

@@ -17,6 +17,7 @@ import errno
 import os
 from collections.abc import Mapping, Sequence
 
+from ros_isolated_test import names, not_run
 from ros_isolated_test.domain_coordinator.resources import RESOURCES_ENV
 from ros_isolated_test.runner import discovery, partition, rmw_fixture
 from ros_isolated_test.runner.request import EnvAssignment
@@ -29,7 +30,6 @@ from ros_isolated_test.runner.settings import (
     disables_isolation,
     isolation_from,
 )
-from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -39,9 +39,8 @@ if TYPE_CHECKING:
     from ros_isolated_test.process.namespace_diagnosis import Problem
 
 DOMAIN_VAR = "ROS_DOMAIN_ID"
-#: Set beside ROS_DOMAIN_ID to the same ID wherever a runner (or the pytest plugin) holds
-#: it: a pytest started under a runner sees the ID is held for it, not preset by someone.
-HELD_VAR = "ROS_ISOLATED_TEST_HELD_DOMAIN_ID"
+#: Beside ROS_DOMAIN_ID where a runner holds it: a pytest under it sees it held, not preset.
+HELD_VAR = names.HELD_DOMAIN_ID
 
 
 def held_for_us(environ: Mapping[str, str]) -> bool:
@@ -53,8 +52,10 @@ def held_for_us(environ: Mapping[str, str]) -> bool:
     return held is not None and held == environ.get(DOMAIN_VAR)
 
 
-class RefusedError(Exception):
+class RefusedError(not_run.NotRun):
     """Isolation cannot be promised; nothing may run. The message is one line."""
+
+    outcome = not_run.FAILURE  # refused on purpose: the user fixes it
 
     def __init__(self, message: str, variable: str = DOMAIN_VAR) -> None:
         super().__init__(message)
@@ -216,8 +217,8 @@ def decide(
     env.pop(RESOURCES_ENV, None)
     # The split is this runner's to decide, for the whole test: a runner or the pytest
     # plugin inside it would split the test's own tests again, over the same shares.
-    env.pop(SHARD_ENV, None)
-    env.pop(DURATIONS_ENV, None)
+    env.pop(names.SHARD, None)
+    env.pop(names.DURATIONS, None)
     assigned = any(item.name == DISABLE_VAR and not item.append for item in assignments)
     if assigned:
         disabled, origin = disables_isolation(env.get(DISABLE_VAR)), f" (by {env_origin})"

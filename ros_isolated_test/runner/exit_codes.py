@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import signal
 
+from ros_isolated_test import not_run
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from ros_isolated_test.process.supervisor import Outcome
@@ -26,6 +28,22 @@ TIMEOUT = 124
 NOT_EXECUTABLE = 126
 #: The command was not found (shell convention).
 NOT_FOUND = 127
+
+
+#: The pytest plugin's, for the same reasons: pytest's usage error, and sysexits.h's
+#: EX_TEMPFAIL for a busy machine (the runner's 3 would read as pytest's internal error).
+PLUGIN_USAGE = 4
+PLUGIN_BUSY = 75
+
+
+def for_not_run(error: not_run.NotRun) -> int:
+    """The runner's exit code for a test that was not run: :data:`USAGE` or :data:`NO_DOMAIN`."""
+    return NO_DOMAIN if error.reason == not_run.BUSY else USAGE
+
+
+def plugin_code(error: not_run.NotRun) -> int:
+    """The pytest plugin's exit code for the same: :data:`PLUGIN_USAGE` or :data:`PLUGIN_BUSY`."""
+    return PLUGIN_BUSY if error.reason == not_run.BUSY else PLUGIN_USAGE
 
 
 def for_signal(signum: int) -> int:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 from ros_isolated_test.switches import NotOnOff, on_off
 from ros_isolated_test.text import bounded
 
@@ -36,7 +36,7 @@ _SAFE = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ012345678
 HOST_CHARS = 32
 
 
-class PartitionSettingError(ValueError):
+class PartitionSettingError(not_run.NotRun, ValueError):
     """The switch has a value that is neither on nor off: one line naming it and the fix."""
 
 

@@ -10,9 +10,7 @@ the series.
 
 from __future__ import annotations
 
-from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
-from ros_isolated_test.domain_coordinator.resource_holds import CapacityConflictError
-from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
+from ros_isolated_test.not_run import NotRun
 from ros_isolated_test.runner import environment, exit_codes
 from ros_isolated_test.runner.attempt import attempt
 from ros_isolated_test.runner.interruption import Interrupted
@@ -73,12 +71,7 @@ def reruns(
             # Signals end a rerun that has not started yet (one queued for an ID) at once.
             guard.next_attempt()
             outcome, domain_id = attempt(request, number, policy, config, result, capture, guard)
-        except (
-            PoolExhaustedError,
-            LockDirError,
-            CapacityConflictError,
-            environment.RefusedError,
-        ) as error:
+        except NotRun as error:
             capture.note(f"attempt {number} did not run: {error}")
             result.properties["rerun_not_run"] = str(error)
             break

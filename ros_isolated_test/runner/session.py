@@ -26,12 +26,9 @@ from __future__ import annotations
 import contextlib
 
 from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
-from ros_isolated_test.domain_coordinator.lock_dir import LockDirError
-from ros_isolated_test.domain_coordinator.resource_holds import CapacityConflictError
-from ros_isolated_test.domain_coordinator.waiting import PoolExhaustedError
+from ros_isolated_test.not_run import NotRun
 from ros_isolated_test.runner import environment, exit_codes, settings, share, streams
 from ros_isolated_test.runner.attempt import attempt
-from ros_isolated_test.runner.discovery import DiscoveryError
 from ros_isolated_test.runner.interruption import Guard, Interrupted, interruptible
 from ros_isolated_test.runner.request import Mode, RunRequest
 from ros_isolated_test.runner.reruns import RERUNS_PROPERTY, reruns
@@ -125,10 +122,8 @@ def _decided(
             command=request.command,
             result_file=request.result_file,
         )
-    except environment.RefusedError as refusal:
-        return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
-    except DiscoveryError as error:
-        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
+    except NotRun as error:  # a preset ID refused, a discovery that cannot be had
+        return _never_ran(result, console, error)
     guard = Guard()
     # The handlers stay until the final word is written: a signal after the test ended
     # (ctest's SIGTERM, a Ctrl-C) is noted in the result, never lets the result be lost.
@@ -155,12 +150,8 @@ def _attempted(
     base = dict(result.properties)
     try:
         outcome, domain_id = attempt(request, 1, policy, config, result, both.capture, guard)
-    except (PoolExhaustedError, LockDirError) as error:
-        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.NO_DOMAIN)
-    except CapacityConflictError as error:
-        return _not_run(result, console, str(error), Outcome.ERROR, exit_codes.USAGE)
-    except environment.RefusedError as refusal:  # namespaces that cannot be had
-        return _not_run(result, console, str(refusal), Outcome.FAILURE, exit_codes.USAGE)
+    except NotRun as error:  # no ID came free, capacities disagree, namespaces refused
+        return _never_ran(result, console, error)
     except Interrupted as interruption:
         name = exit_codes.signal_name(interruption.signum)
         message = f"interrupted by {name} before the test started (it never ran)"
@@ -197,6 +188,13 @@ def report_usage_error(message: str, result_file: Path | None) -> int:
 def _result_file(request: RunRequest) -> ResultFile:
     """The request's result file, its suite named as ament names the test."""
     return ResultFile(request.result_file, request.command, request.package, request.test_name)
+
+
+def _never_ran(result: ResultFile, console: BinaryIO, error: NotRun) -> int:
+    """The test was not run: the outcome and exit code its error carries (``exit_codes``)."""
+    return _not_run(
+        result, console, str(error), Outcome(error.outcome), exit_codes.for_not_run(error)
+    )
 
 
 def _not_run(result: ResultFile, console: BinaryIO, message: str, kind: Outcome, code: int) -> int:

@@ -23,7 +23,7 @@ import math
 import os
 from pathlib import Path
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 from ros_isolated_test.domain_coordinator.lock_dir import LOCK_DIR_ENV, lock_dir_from_env
 from ros_isolated_test.domain_coordinator.pool import (
     LINUX_DEFAULT_PORT_RANGE,
@@ -95,7 +95,7 @@ __all__ = [
 ]
 
 
-class SettingsError(ValueError):
+class SettingsError(not_run.NotRun, ValueError):
     """A setting that cannot be used: one line naming the option or variable and the fix."""
 
 

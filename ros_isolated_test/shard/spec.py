@@ -15,7 +15,7 @@ or option, the value and the fix, in one line: a typo must never run the wrong t
 
 from __future__ import annotations
 
-from ros_isolated_test import names
+from ros_isolated_test import names, not_run
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 
-class ShardSettingError(ValueError):
+class ShardSettingError(not_run.NotRun, ValueError):
     """A setting of the split that cannot be used: one line naming it and the fix."""
 
 

@@ -50,6 +50,7 @@ LAYERS = (
         "": "bottom",
         "atomic_file": "bottom",
         "names": "bottom",
+        "not_run": "bottom",
         "schemas": "bottom",
         "switches": "bottom",
         "text": "bottom",
