@@ -49,7 +49,7 @@ from pathlib import Path
 
 from common import OURS, REPO, Context, Section, progress, ratio, secs
 
-from ros_isolated_test.report.measured import named_tests
+from ros_isolated_test.report.shard_durations import named_tests
 from ros_isolated_test.report.tree import read_tree
 from ros_isolated_test.shard.durations import MICROS, Durations, load, write
 

@@ -16,7 +16,7 @@ from ros_isolated_test.cli import usage
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
-    from ros_isolated_test.report.shards import Split
+    from ros_isolated_test.report.shard import Split
     from ros_isolated_test.report.text_report import TextReport
 
 
@@ -67,7 +67,7 @@ def report(
     or when a test ran in two of them. On a machine whose ROS_ISOLATED_TEST_SHARD is
     set, only that share is expected.
     """
-    from ros_isolated_test.report import shards, text_report, tree
+    from ros_isolated_test.report import shard, text_report, tree
     from ros_isolated_test.runner import settings
     from ros_isolated_test.shard.spec import ShardSettingError
 
@@ -84,7 +84,7 @@ def report(
         _write_durations(paths, durations_file)
         return
     try:
-        split = shards.Split(settings.machine_share())
+        split = shard.Split(settings.machine_share())
     except ShardSettingError as error:
         usage.fail(str(error), usage.USAGE)
     # A folder it cannot read is an error; a flaky case (passed after failing) is listed
@@ -125,10 +125,10 @@ def _html_report(
 
 def _write_durations(paths: tuple[Path, ...], destination: Path) -> None:
     """``--durations FILE``: the tests' times under ``paths``, written; nothing found: exit 2."""
-    from ros_isolated_test.report import measured, tree
+    from ros_isolated_test.report import shard_durations, tree
     from ros_isolated_test.shard.durations import DurationsError, write
 
-    gathered = measured.Gathered()
+    gathered = shard_durations.Gathered()
     for item in tree.read_tree(paths):
         gathered.add(item)
     durations = gathered.durations()

@@ -73,9 +73,9 @@ def tests_in(trees: tuple[Path, ...]) -> set[str]:
     """The identities of the tests the runner and the plugin left results for under ``trees``.
 
     A runner's result file is its ctest test, an item in pytest's file under the plugin
-    the node id it names (``report.measured``); other files name no test and are left out.
+    the node id it names (``report.shard_durations``); other files name no test and are left out.
     """
-    from ros_isolated_test.report.measured import named_tests
+    from ros_isolated_test.report.shard_durations import named_tests
     from ros_isolated_test.report.tree import read_file, result_files
     from ros_isolated_test.text import display_text
 

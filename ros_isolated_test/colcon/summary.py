@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from ros_isolated_test.report import html_report
-from ros_isolated_test.report.shards import Split
+from ros_isolated_test.report.shard import Split
 from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.shard.spec import ShardSettingError
 

@@ -1,6 +1,6 @@
 """The result trees of one run into the history: every attempt of every test, once.
 
-A test is named as the split names it (``report.measured``): a runner's file is one
+A test is named as the split names it (``report.shard_durations``): a runner's file is one
 test, ``<package>/<test>``; pytest's own file under the plugin one test per item. Its
 attempts come from the file: a rerun test's earlier attempts each failed (a test is run
 again only after failing) and keep their own exit, domain ID and duration
@@ -25,7 +25,7 @@ from pathlib import Path
 
 from ros_isolated_test import __version__, names
 from ros_isolated_test.history.store import StoreError, connect, problem, prune, stored
-from ros_isolated_test.report.measured import named_tests
+from ros_isolated_test.report.shard_durations import named_tests
 from ros_isolated_test.report.tree import FileRead, read_tree
 from ros_isolated_test.shard.identity import IdentityError, split
 

@@ -20,7 +20,7 @@ INI = "ros_isolation"
 #: The session's request of machine resources: the ini option and its command-line twin.
 RESOURCES_INI = "ros_isolated_test_resources"
 RESOURCES_OPTION = "--ros-isolated-test-resources"
-#: The session's share of a split (sharding.py reads it).
+#: The session's share of a split (shard.py reads it).
 SHARD_OPTION = "--ros-isolated-test-shard"
 #: Options that run no test (as --help): nothing is reserved for them.
 _NO_TEST_OPTIONS = ("help", "markers", "showfixtures", "show_fixtures_per_test", "collectonly")

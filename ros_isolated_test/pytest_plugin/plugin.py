@@ -29,7 +29,7 @@ import pytest
 TYPE_CHECKING = False  # nothing of the runner is imported until the plugin is active
 if TYPE_CHECKING:
     from ros_isolated_test.pytest_plugin.holding import State
-    from ros_isolated_test.pytest_plugin.sharding import Sharding
+    from ros_isolated_test.pytest_plugin.shard import Sharding
 
 _STATE: pytest.StashKey[State] = pytest.StashKey()
 _SHARDING: pytest.StashKey[Sharding] = pytest.StashKey()
@@ -71,8 +71,8 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def _split(config: pytest.Config, active: bool) -> None:
-    """The session's share of a split, and the naming of its items (sharding.py)."""
-    from ros_isolated_test.pytest_plugin import sharding
+    """The session's share of a split, and the naming of its items (shard.py)."""
+    from ros_isolated_test.pytest_plugin import shard as sharding
 
     decided = sharding.decide(config, active)
     if decided is not None:
@@ -114,14 +114,14 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Each item named by its identity; the other shares' items deselected (sharding.py).
+    """Each item named by its identity; the other shares' items deselected (shard.py).
 
     Last: the split places what pytest's own selection (``-k``, ``-m``) kept, so a share
     it empties is told apart from a session that selected nothing.
     """
     split = config.stash.get(_SHARDING, None)
     if split is not None:
-        from ros_isolated_test.pytest_plugin import sharding
+        from ros_isolated_test.pytest_plugin import shard as sharding
 
         sharding.select_items(split, config, items)
 
@@ -158,7 +158,7 @@ def pytest_runtest_makereport(item: pytest.Item) -> Generator[None, Any, None]:
     outcome = yield
     split = item.config.stash.get(_SHARDING, None)
     if split is not None and split.named:
-        from ros_isolated_test.pytest_plugin import sharding
+        from ros_isolated_test.pytest_plugin import shard as sharding
 
         sharding.timed(item, outcome.get_result())
 
@@ -172,7 +172,7 @@ def pytest_testnodedown(node: object, error: object) -> None:
         return
     split = config.stash.get(_SHARDING, None)
     if split is not None:  # what the worker's split deselected: the controller's exit code
-        from ros_isolated_test.pytest_plugin import sharding
+        from ros_isolated_test.pytest_plugin import shard as sharding
 
         sharding.worker_done(split, output)
     state = config.stash.get(_STATE, None)
@@ -224,7 +224,7 @@ def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]
     config = session.config
     split = config.stash.get(_SHARDING, None)
     if split is not None:  # a session whose share the split emptied passed: not 5
-        from ros_isolated_test.pytest_plugin import sharding
+        from ros_isolated_test.pytest_plugin import shard as sharding
 
         session.exitstatus = sharding.exit_status(split, session.exitstatus)
     state = config.stash.get(_STATE, None)

@@ -40,7 +40,7 @@ from ros_isolated_test.report.counts import FileReport, listed_as_flaky
 from ros_isolated_test.report.html_page import FACTS, Page, assemble
 from ros_isolated_test.report.html_parts import text, write_case, write_suite
 from ros_isolated_test.report.html_timeline import BAR_TEXT
-from ros_isolated_test.report.shards import Split
+from ros_isolated_test.report.shard import Split
 from ros_isolated_test.report.tree import FileRead, read_tree
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import raw

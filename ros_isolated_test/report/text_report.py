@@ -23,7 +23,7 @@ from ros_isolated_test.report.counts import (
     not_run_again,
     summary_line,
 )
-from ros_isolated_test.report.shards import Split
+from ros_isolated_test.report.shard import Split
 from ros_isolated_test.report.spool import Spool
 from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.text import display_text

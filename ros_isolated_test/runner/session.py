@@ -4,7 +4,7 @@ Every entry point (shell ``run``, ctest RUNNER script, Docker entrypoint) builds
 :class:`~ros_isolated_test.runner.request.RunRequest` and calls :func:`run`. Read it
 as the table of contents of a run; each step lives in a module of its own:
 
-0. ``share``: in a split, a test of another share is not run at all (nothing reserved,
+0. ``shard``: in a split, a test of another share is not run at all (nothing reserved,
    no result file); this share's tests record it;
 1. ``streams``: the console and the --output-file, or one line saying why not;
 2. the result file (``xunit.result_file``): stale files gone, a placeholder in place;
@@ -27,7 +27,7 @@ import contextlib
 
 from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
 from ros_isolated_test.not_run import NotRun
-from ros_isolated_test.runner import environment, exit_codes, settings, share, streams
+from ros_isolated_test.runner import environment, exit_codes, settings, shard, streams
 from ros_isolated_test.runner.attempt import attempt
 from ros_isolated_test.runner.interruption import Guard, Interrupted, interruptible
 from ros_isolated_test.runner.request import Mode, RunRequest
@@ -48,7 +48,7 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     streams.keep_standard_descriptors()
     console = console if console is not None else streams.console()
     result = _result_file(request)
-    elsewhere = share.decide(request, result, console)
+    elsewhere = shard.decide(request, result, console)
     if elsewhere is not None:
         return elsewhere
     try:
@@ -85,7 +85,7 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
     # A result or output file that could not be written is a failed run, never a silent pass.
     code = exit_codes.final(code, result.write_error, both.capture.file_error)
     _recorded(result)
-    return share.exit_code(request, code, console)
+    return shard.exit_code(request, code, console)
 
 
 def _recorded(result: ResultFile) -> None:

@@ -33,7 +33,7 @@ from helpers.report_page import parsed
 from helpers.workspace import crosstalk_workspace
 from lxml import etree, html
 
-from ros_isolated_test.report.measured import named_tests
+from ros_isolated_test.report.shard_durations import named_tests
 from ros_isolated_test.report.tree import read_tree
 from ros_isolated_test.shard.durations import load
 from ros_isolated_test.xunit import canonical

@@ -1,4 +1,4 @@
-"""``report.shards``: a split's trees merged, and every way the merge can fall short, named.
+"""``report.shard``: a split's trees merged, and every way the merge can fall short, named.
 
 The machines' trees (``helpers.split_trees``: what the runners and the plugin leave) are
 read as ``report`` reads them. A complete split says nothing wrong; a missing share, two
@@ -15,7 +15,7 @@ from helpers.report_page import parsed, timeline_rows
 from helpers.split_trees import runner_file, split_trees
 
 from ros_isolated_test.report import html_report
-from ros_isolated_test.report.shards import Split
+from ros_isolated_test.report.shard import Split
 from ros_isolated_test.report.tree import read_tree
 from ros_isolated_test.shard import record
 from ros_isolated_test.shard.durations import measured

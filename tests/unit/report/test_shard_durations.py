@@ -1,4 +1,4 @@
-"""``report.measured``: which tests a result file holds by identity, and how long each took.
+"""``report.shard_durations``: which tests a result file holds by identity, and how long each took.
 
 A RUNNER's file is its ctest test (its ``duration``), pytest's file under the plugin is
 its named items (their times); anything else names no test. Several runs merge into the
@@ -20,7 +20,7 @@ from helpers.commands import ament_args, run_cli, start_runner
 from helpers.processes import DEADLINE, wait_for
 from helpers.split_trees import pytest_file, runner_file, split_trees
 
-from ros_isolated_test.report.measured import Gathered, named_tests
+from ros_isolated_test.report.shard_durations import Gathered, named_tests
 from ros_isolated_test.report.tree import read_file, read_tree
 from ros_isolated_test.shard.durations import measured
 from ros_isolated_test.xunit import serialise

@@ -1,4 +1,4 @@
-"""``sharding``: a pytest session runs its share of a split, test by test, as real sessions.
+"""``pytest_plugin.shard``: a pytest session runs its share of a split, as real sessions.
 
 Each share's session deselects the others' items (they are not in its ``--junit-xml``),
 names every item it keeps by its identity, records its share beside the file (started

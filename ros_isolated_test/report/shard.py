@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ros_isolated_test.report.measured import named_tests
+from ros_isolated_test.report.shard_durations import named_tests
 from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.shard import record
 from ros_isolated_test.shard.selection import PLAN_PROPERTY, SHARD_PROPERTY

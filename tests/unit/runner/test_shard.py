@@ -1,4 +1,4 @@
-"""``share``: a split's step of the run, through the RUNNER and ``run`` as real processes.
+"""``runner.shard``: a split's step of the run, through the RUNNER and ``run`` as real processes.
 
 A test of another share runs nothing, leaves no result file (a stale one goes) but the
 machine's record, says why in one line and exits with its skip code (77 when it has
