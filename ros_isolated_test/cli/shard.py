@@ -2,7 +2,7 @@
 
 The command only parses its arguments and hands over: the plan and its rendering live
 in ``ros_isolated_test.shard``. What it reads of result trees is one function,
-:func:`tests_in`, through the report package's reading of which tests a file names.
+:func:`tests_in`, through the report package (``report.shard_durations.tests_in``).
 Added to the command group by ``cli/__init__.py`` (``cli.add_command``).
 """
 
@@ -70,26 +70,19 @@ def shard(
 
 
 def tests_in(trees: tuple[Path, ...]) -> set[str]:
-    """The identities of the tests the runner and the plugin left results for under ``trees``.
+    """The tests the runner and the plugin left results for under ``trees``.
 
-    A runner's result file is its ctest test, an item in pytest's file under the plugin
-    the node id it names (``report.shard_durations``); other files name no test and are left out.
+    Read by the report package; a folder it cannot read is one note on stderr.
     """
-    from ros_isolated_test.report.shard_durations import named_tests
-    from ros_isolated_test.report.tree import read_file, result_files
+    from ros_isolated_test.report.shard_durations import tests_in as read_tests
     from ros_isolated_test.text import display_text
 
-    found: set[str] = set()
-    for path in result_files(trees):
-        if isinstance(path, OSError):
-            folder = display_text(str(path.filename))
-            click.echo(
-                f"ros-isolated-test: note: cannot read {folder}: {path.strerror}; its tests "
-                "are not shown",
-                err=True,
-            )
-            continue
-        item = read_file(path)
-        if item is not None:
-            found.update(key for key, _seconds in named_tests(item))
+    found, unreadable = read_tests(trees)
+    for error in unreadable:
+        folder = display_text(str(error.filename))
+        click.echo(
+            f"ros-isolated-test: note: cannot read {folder}: {error.strerror}; its tests "
+            "are not shown",
+            err=True,
+        )
     return found

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 
 from ros_isolated_test import names
-from ros_isolated_test.report.tree import FileRead
+from ros_isolated_test.report.tree import FileRead, read_file, result_files
 from ros_isolated_test.shard.durations import Durations, measured, merge
 from ros_isolated_test.shard.identity import SEPARATOR, IdentityError, identity, split
 from ros_isolated_test.xunit.canonical import test_name_of
@@ -34,12 +34,14 @@ from ros_isolated_test.xunit.placeholder import KILLED, WRITTEN_AT, killed_secon
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from ros_isolated_test.xunit.model import Case
 
 #: The suite property a runner records its test's run time in (``runner.verdict``).
 DURATION_PROPERTY = names.DURATION
 
-__all__ = ["Gathered", "named_tests"]
+__all__ = ["Gathered", "named_tests", "tests_in"]
 
 
 def _seconds(text: str) -> float | None:
@@ -132,3 +134,22 @@ class Gathered:
             for k in range(rounds)
         ]
         return merge(runs)
+
+
+def tests_in(trees: tuple[Path, ...]) -> tuple[set[str], list[OSError]]:
+    """The identities of the tests named by the result files under ``trees`` (``shard --plan``).
+
+    A runner's result file is its ctest test, an item in pytest's file under the plugin
+    the node id it names (:func:`named_tests`); other files name no test and are left
+    out. The folders that could not be read come back beside them, for the caller to say.
+    """
+    found: set[str] = set()
+    unreadable: list[OSError] = []
+    for path in result_files(trees):
+        if isinstance(path, OSError):
+            unreadable.append(path)
+            continue
+        item = read_file(path)
+        if item is not None:
+            found.update(key for key, _seconds in named_tests(item))
+    return found, unreadable

@@ -20,6 +20,7 @@ from helpers.commands import ament_args, run_cli, start_runner
 from helpers.processes import DEADLINE, wait_for
 from helpers.split_trees import pytest_file, runner_file, split_trees
 
+from ros_isolated_test.report import shard_durations
 from ros_isolated_test.report.shard_durations import Gathered, named_tests
 from ros_isolated_test.report.tree import read_file, read_tree
 from ros_isolated_test.shard.durations import measured
@@ -224,3 +225,21 @@ def test_quick_pytest_items_are_measured_to_the_microsecond_and_spread_by_count(
     proc = run_cli(["report", "--durations", str(from_time), str(stripped.parent)], env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert load(from_time).micros == {key: rounded(float(t)) for key, (t, _s) in cases.items()}
+
+
+def test_tests_in_a_tree_are_the_runners_tests_and_other_files_name_none(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    tree = tmp_path / "tree"
+    ran = run_cli(
+        ["run", "--junit-xml", str(tree / "pkg" / "t.xml"), "--package-name", "pkg", "--", "true"],
+        env,
+        cwd=tmp_path,
+    )
+    assert ran.returncode == 0, ran.stderr
+    (tree / "other.xml").write_text(
+        '<testsuite name="x" tests="1"><testcase name="c"/></testsuite>'
+    )
+    found, unreadable = shard_durations.tests_in((tree,))
+    assert len(found) == 1 and next(iter(found)).startswith("pkg"), found
+    assert unreadable == []
