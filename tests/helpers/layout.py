@@ -10,6 +10,7 @@ a module whose tests are long may add topic files beside it, named
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 #: The folders beside ``unit/`` that hold test modules; nothing else in tests/ does.
@@ -73,3 +74,38 @@ def loose_tests(tests_dir: Path) -> list[str]:
         if not any(home in path.parents for home in homes)
         and "data" not in path.relative_to(tests_dir).parts
     ]
+
+
+def _layout_rows(contributing: str) -> list[str]:
+    """The rows of the layout table: docs/contributing.md's "## Layout" section."""
+    section = contributing.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
+    return [line for line in section.splitlines() if line.startswith("| ")]
+
+
+def _named_in(row: str, module: Path) -> bool:
+    """Whether ``row`` names ``module`` (relative to the package): its path, or its folder
+    and its name (``report/`` (`tree`, ...) names ``report/tree.py``).
+    """
+    full = module.as_posix()
+    if f"`{full}`" in row or f"/{full}`" in row:
+        return True
+    stem = re.escape(module.stem)
+    if not re.search(rf"`{stem}(\.py)?`", row):
+        return False
+    folder = module.parent.as_posix()
+    return folder == "." or bool(re.search(rf"`(ros_isolated_test/)?{re.escape(folder)}/", row))
+
+
+def unnamed_modules(package_dir: Path, contributing: str) -> list[str]:
+    """The package's modules the layout table names nowhere (an ``__init__`` with no code,
+    a docstring and imports only, needs no row).
+    """
+    rows = _layout_rows(contributing)
+    found = []
+    for path in sorted(package_dir.rglob("*.py")):
+        if "__pycache__" in path.parts or (path.name == "__init__.py" and not _defines_code(path)):
+            continue
+        module = path.relative_to(package_dir)
+        if not any(_named_in(row, module) for row in rows):
+            found.append(module.as_posix())
+    return found

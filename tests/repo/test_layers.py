@@ -1,17 +1,22 @@
 """The package's imports: no circles, and none from a lower layer to a higher one.
 
-The layers, highest first (``LAYERS``): the entry points (the CLI; the ``pytest_plugin``
-package with its launch cases), then ``runner``, then ``report`` (a tree of result files
-counted, printed and drawn: it reads each file through ``xunit``, and sits below
-``runner`` so that a runner may read what a report wrote, such as measured durations),
-then ``domain_coordinator``, then ``process`` and ``xunit``, then ``shard`` (splitting
-tests over machines: all the above read it), then at the bottom ``schemas``, ``text``,
-``switches``, ``atomic_file`` and the package's own ``__init__`` (its version). A module
-imports within its own unit (a
-package, or the modules named together below) or from any lower layer, never from a
-higher one. Two units of one layer do not import each other: ``process`` and ``xunit``
-share no code (nor do the CLI and the plugin), so either can change without the other;
-the bottom is one unit. Within a unit, imports go sideways, without circles.
+The layers, highest first (``LAYERS``): the ways in at the top (the ``cli`` package and
+``__main__``; the ``pytest_plugin`` package with its launch cases; the ``colcon``
+extension), then ``ament`` (the ctest RUNNER, its arguments and where it is installed: a
+way in too, below the others because the command and colcon point users at its script
+and include), then ``runner`` (a request turned into an exit code), then ``history``,
+then ``report`` (a tree of result files counted, printed and drawn: it reads each file
+through ``xunit``, and sits below ``runner`` so that a runner may read what a report
+wrote, such as measured durations), then ``domain_coordinator``, then ``process`` and
+``xunit``, then ``shard`` (splitting tests over machines: all the above read it), then
+at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``, ``names`` (the
+registry of variables and properties), ``not_run`` (the base of the errors that stop a
+test before it runs) and the package's own ``__init__`` (its version). A module imports
+within its own unit (a package, or the modules named together below) or from any lower
+layer, never from a higher one. Two units of one layer do not import each other:
+``process`` and ``xunit`` share no code (nor do the CLI, the plugin and the colcon
+extension), so either can change without the other; the bottom is one unit. Within a
+unit, imports go sideways, without circles.
 
 Every import counts (see ``helpers.imports``): at module level, inside a function, and
 under ``TYPE_CHECKING``. A lazy import hides a circle from Python's start-up but leaves

@@ -5,7 +5,8 @@ A newcomer looking for the tests of ``ros_isolated_test/xunit/reader.py`` opens
 it). Tests that run the tool as its users do, across its parts (ctest, colcon, Docker,
 real ROS, the result files' consumers), live in ``tests/e2e/``; checks of the repository
 itself (docs, imports, packaging) in ``tests/repo/``. No product module is over 500
-lines: past that, a file holds more than its name says.
+lines: past that, a file holds more than its name says. docs/contributing.md's layout
+table names every module, so a newcomer finds what each one does.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from helpers.commands import REPO
-from helpers.layout import loose_tests, missing_tests, strays
+from helpers.layout import loose_tests, missing_tests, strays, unnamed_modules
 
 PACKAGE = REPO / "ros_isolated_test"
 TESTS = REPO / "tests"
@@ -72,3 +73,28 @@ def test_no_product_module_is_over_500_lines() -> None:
     }
     assert {path: lines for path, lines in sizes.items() if lines > MODULE_LIMIT} == {}
     assert max(sizes.values()) > 100  # control: the files were read
+
+
+def test_the_layout_table_names_every_module() -> None:
+    contributing = (REPO / "docs" / "contributing.md").read_text(encoding="utf-8")
+    assert unnamed_modules(PACKAGE, contributing) == []
+
+
+def test_control_a_module_the_table_leaves_out_is_seen(tmp_path: Path) -> None:
+    code = "def f() -> None:\n    pass\n"
+    _plant(
+        tmp_path,
+        {
+            "pkg/top.py": code,
+            "pkg/sub/__init__.py": "",
+            "pkg/sub/kept.py": code,
+            "pkg/sub/gone.py": code,
+            "pkg/sub/deep/leaf.py": code,
+        },
+    )
+    table = (
+        "# Contributing\n\n## Layout\n\n| step | where |\n|---|---|\n"
+        "| one | `top.py`, `sub/` (`kept`: named by its folder and name) |\n"
+        "| two | `sub/deep/leaf.py` |\n\n## Next\n\n| `gone` | elsewhere |\n"
+    )
+    assert unnamed_modules(tmp_path / "pkg", table) == ["sub/gone.py"]
