@@ -141,25 +141,48 @@ RESULT_FILE_IN_PLACE = "result_file_in_place"
 PLACEHOLDER_WRITTEN_AT = "placeholder_written_at"
 IDENTITY = "ros_isolated_test_identity"
 SECONDS = "ros_isolated_test_seconds"
+ROS_DOMAIN_IDS = "ros_domain_ids"
+ROS_DOMAIN_ID_RESERVED = "ros_domain_id_reserved"
+ROS_DOMAIN_ID_REPLACED = "ros_domain_id_replaced"
+ISOLATION_PROPERTY = "isolation"
+ROS_DISCOVERY_RANGE = "ros_discovery_range"
+ROS_DISCOVERY_RANGE_SOURCE = "ros_discovery_range_source"
+RMW_TEST_FIXTURE = "rmw_test_fixture"
+SIGNAL_RECEIVED = "signal_received"
+SIGNAL_AFTER_TEST = "signal_after_test"
+RESOURCES_PROPERTY = "resources"
+RESOURCES_WAITED = "resources_waited"
+CAPACITY_PROPERTY = "capacity"
+SETTINGS_NOTES = "settings_notes"
+RERUN_FAILURES = "rerun_failures"
+RERUN_NOT_RUN = "rerun_not_run"
+RESULT_FILE_REPAIRS = "result_file_repairs"
+ORIGINAL_RESULT_FILE = "original_result_file"
+ORIGINAL_RESULT_FILE_ERROR = "original_result_file_error"
+OUTPUT_FILE_ERROR = "output_file_error"
+CONSOLE_ERROR = "console_error"
+RESULT_WRITE_ERROR = "result_write_error"
+LEFTOVER_PROCESSES = "leftover_processes"
+SURVIVING_PROCESSES = "surviving_processes"
 #: How an earlier attempt's properties are named: ``attempt_1.exit_code``.
 ATTEMPT_PREFIX = "attempt_{number}."
 
 PROPERTIES = (
     Name(COMMAND, "the test's command line", "report"),
     Name(DOMAIN_ID, "the domain ID the test ran on", "report, history"),
-    Name("ros_domain_ids", "every attempt's ID, after reruns", "report"),
-    Name("ros_domain_id_reserved", "yes: reserved by the runner (namespace isolation)", "report"),
-    Name("ros_domain_id_replaced", "an ID another tool set, replaced by ours", "report"),
+    Name(ROS_DOMAIN_IDS, "every attempt's ID, after reruns", "report"),
+    Name(ROS_DOMAIN_ID_RESERVED, "yes: reserved by the runner (namespace isolation)", "report"),
+    Name(ROS_DOMAIN_ID_REPLACED, "an ID another tool set, replaced by ours", "report"),
     Name(GZ_PARTITION, "the Gazebo partition the test had", "report, status"),
-    Name("isolation", "domain, namespace, or why not isolated", "report, colcon summary"),
-    Name("ros_discovery_range", "the test's discovery range", "report"),
-    Name("ros_discovery_range_source", "where its discovery range came from", "report"),
-    Name("rmw_test_fixture", "what Kilted's rmw_test_fixture did in the test", "report"),
+    Name(ISOLATION_PROPERTY, "domain, namespace, or why not isolated", "report, colcon summary"),
+    Name(ROS_DISCOVERY_RANGE, "the test's discovery range", "report"),
+    Name(ROS_DISCOVERY_RANGE_SOURCE, "where its discovery range came from", "report"),
+    Name(RMW_TEST_FIXTURE, "what Kilted's rmw_test_fixture did in the test", "report"),
     Name(EXIT, "how the test ended, in words", "report, history"),
     Name(EXIT_CODE, "the test's exit code", "report"),
     Name(SIGNAL, "the signal that killed the test", "report"),
-    Name("signal_received", "the signal the runner got before the test started", "report"),
-    Name("signal_after_test", "the signal the runner got after the test ended", "report"),
+    Name(SIGNAL_RECEIVED, "the signal the runner got before the test started", "report"),
+    Name(SIGNAL_AFTER_TEST, "the signal the runner got after the test ended", "report"),
     Name(DURATION, "seconds the test ran", "report, history"),
     Name(
         STARTED_AT,
@@ -170,11 +193,11 @@ PROPERTIES = (
     Name(WAIT_DOMAIN, "seconds waited for an ID", "report"),
     Name(WAIT_RESOURCES, "seconds waited for the resources asked for", "report"),
     Name(DOMAIN_POOL, "the pool the ID came from", "report"),
-    Name("resources", "the resources the test held", "report"),
-    Name("resources_waited", "seconds waited for them", "report"),
-    Name("capacity", "the machine's capacity", "report"),
+    Name(RESOURCES_PROPERTY, "the resources the test held", "report"),
+    Name(RESOURCES_WAITED, "seconds waited for them", "report"),
+    Name(CAPACITY_PROPERTY, "the machine's capacity", "report"),
     Name(RUNNER_VERSION, "the runner's version: the file is ours", "report, history"),
-    Name("settings_notes", "notes on the settings, as printed", "report"),
+    Name(SETTINGS_NOTES, "notes on the settings, as printed", "report"),
     Name(SHARD_PROPERTY, "the share that ran the test, I/N", "report, history"),
     Name(
         SHARD_PLAN,
@@ -184,18 +207,18 @@ PROPERTIES = (
     Name(ATTEMPTS, "how many attempts ran", "report, history"),
     Name(FLAKY_CASES, "how many cases passed after failing", "report"),
     Name(RENAMED_CASES, "cases renamed apart for GitLab's keys", "report"),
-    Name("rerun_failures", "the reruns allowed", "report"),
-    Name("rerun_not_run", "why a rerun did not run", "report"),
-    Name("result_file_repairs", "what was fixed in the test's own file", "report"),
+    Name(RERUN_FAILURES, "the reruns allowed", "report"),
+    Name(RERUN_NOT_RUN, "why a rerun did not run", "report"),
+    Name(RESULT_FILE_REPAIRS, "what was fixed in the test's own file", "report"),
     Name(RESULT_FILE_IN_PLACE, "the test wrote its file in place itself", "report"),
     Name(PLACEHOLDER_WRITTEN_AT, "when the placeholder was written", "report"),
-    Name("original_result_file", "where the test's own file is kept", "report"),
-    Name("original_result_file_error", "why the test's own file could not be read", "report"),
-    Name("output_file_error", "why --output-file lost output", "report"),
-    Name("console_error", "why the console lost output", "report"),
-    Name("result_write_error", "why the full result could not be written", "report"),
-    Name("leftover_processes", "processes the test left, ended by the runner", "report"),
-    Name("surviving_processes", "processes that could not be ended", "report"),
+    Name(ORIGINAL_RESULT_FILE, "where the test's own file is kept", "report"),
+    Name(ORIGINAL_RESULT_FILE_ERROR, "why the test's own file could not be read", "report"),
+    Name(OUTPUT_FILE_ERROR, "why --output-file lost output", "report"),
+    Name(CONSOLE_ERROR, "why the console lost output", "report"),
+    Name(RESULT_WRITE_ERROR, "why the full result could not be written", "report"),
+    Name(LEFTOVER_PROCESSES, "processes the test left, ended by the runner", "report"),
+    Name(SURVIVING_PROCESSES, "processes that could not be ended", "report"),
     Name(IDENTITY, "a pytest item's test under the plugin (a case property)", "report, shard"),
     Name(
         SECONDS,

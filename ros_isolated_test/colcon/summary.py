@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from ros_isolated_test import names
 from ros_isolated_test.report import html_report
 from ros_isolated_test.report.shard import Split
 from ros_isolated_test.report.tree import FileRead
@@ -33,7 +34,7 @@ class DomainIds:
         if item.read is None:
             return
         for suite in item.read.suites:
-            if suite.properties.get("isolation") == "disabled":
+            if suite.properties.get(names.ISOLATION_PROPERTY) == "disabled":
                 continue
             for name, value in suite.properties.items():
                 if name.split(".", 1)[0].endswith("ros_domain_id") and value.isdigit():

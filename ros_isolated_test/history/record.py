@@ -80,15 +80,15 @@ class Run:
             return
         properties = read.suites[0].properties
         self.host = self.host or read.suites[0].attrs.get("hostname", "")
-        self.shard = self.shard or properties.get("shard", "")
-        self.plan = self.plan or properties.get("shard_plan", "")
+        self.shard = self.shard or properties.get(names.SHARD_PROPERTY, "")
+        self.plan = self.plan or properties.get(names.SHARD_PLAN, "")
         self.version = self.version or properties.get(names.RUNNER_VERSION, "")
         if len(read.suites) == 1 and names.RUNNER_VERSION in properties:
             for name, seconds in named_tests(item):
                 self.tests[name] = _runner_attempts(item, seconds)
                 self.starts[name] = properties.get(
                     "attempt_1.started_at",
-                    properties.get("started_at", read.suites[0].attrs.get("timestamp", "")),
+                    properties.get(names.STARTED_AT, read.suites[0].attrs.get("timestamp", "")),
                 )
             return
         self._items(item)
@@ -97,7 +97,7 @@ class Run:
         """Pytest's own file: each item named by its identity property, once."""
         assert item.read is not None
         seconds_of = dict(named_tests(item))
-        domain = _domain(item.read.suites[0].properties.get("ros_domain_id", ""))
+        domain = _domain(item.read.suites[0].properties.get(names.DOMAIN_ID, ""))
         for case in item.read.cases:
             try:
                 split(case.identity)
@@ -158,7 +158,7 @@ def _signature(text: str) -> str:
 def _final(item: FileRead) -> str:
     """The last attempt's outcome of a runner's file."""
     assert item.read is not None
-    exit_text = item.read.suites[0].properties.get("exit", "")
+    exit_text = item.read.suites[0].properties.get(names.EXIT, "")
     report = item.report
     if exit_text == "not run":
         return "not run"
@@ -177,17 +177,19 @@ def _runner_attempts(item: FileRead, seconds: float | None) -> list[AttemptRow]:
     """Every attempt of a runner's test: the earlier ones failed, the last as the file says."""
     assert item.read is not None
     properties = item.read.suites[0].properties
-    total = int(properties.get("attempts", "1") or 1)
+    total = int(properties.get(names.ATTEMPTS, "1") or 1)
     rows: list[AttemptRow] = []
     for number in range(1, total):
-        exit_text = properties.get(f"attempt_{number}.exit", properties.get("exit", ""))
+        exit_text = properties.get(f"attempt_{number}.exit", properties.get(names.EXIT, ""))
         rows.append(
             (
                 "timed out" if "timed out" in exit_text else "failed",
-                _seconds(properties.get(f"attempt_{number}.duration", properties.get("duration"))),
+                _seconds(
+                    properties.get(f"attempt_{number}.duration", properties.get(names.DURATION))
+                ),
                 _domain(
                     properties.get(
-                        f"attempt_{number}.ros_domain_id", properties.get("ros_domain_id", "")
+                        f"attempt_{number}.ros_domain_id", properties.get(names.DOMAIN_ID, "")
                     )
                 ),
                 _signature(exit_text),
@@ -197,8 +199,8 @@ def _runner_attempts(item: FileRead, seconds: float | None) -> list[AttemptRow]:
     signature = ""
     if final in FAILING:
         failed = next((case for case in item.cases if case.outcome.failed), None)
-        signature = _signature(failed.message if failed else properties.get("exit", ""))
-    rows.append((final, seconds, _domain(properties.get("ros_domain_id", "")), signature))
+        signature = _signature(failed.message if failed else properties.get(names.EXIT, ""))
+    rows.append((final, seconds, _domain(properties.get(names.DOMAIN_ID, "")), signature))
     return rows
 
 

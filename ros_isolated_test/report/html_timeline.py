@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from html import escape
 
+from ros_isolated_test import names
 from ros_isolated_test.report.bounded_values import LONGEST, Reading, local
 from ros_isolated_test.report.counts import FileReport
 from ros_isolated_test.report.html_parts import attr, text
@@ -100,7 +101,7 @@ def bars_of(
     its own timestamp and time, when it has a plausible one. Every value is read within
     bounds (``reading``): one that cannot be drawn is named there, never computed with.
     """
-    final = _final_state(properties.get("exit", ""), report)
+    final = _final_state(properties.get(names.EXIT, ""), report)
     machine = machine_of(properties, host)
     if STARTED_AT not in properties:
         span = _producer_span(read, reading)
@@ -204,7 +205,7 @@ def _final_state(exit_reason: str, report: FileReport) -> str:
 
 def _domain(properties: dict[str, str], prefix: str, reading: Reading) -> str:
     """The attempt's domain ID as a number's text; "" without one of ours (isolation off)."""
-    if properties.get("isolation") == "disabled":
+    if properties.get(names.ISOLATION_PROPERTY) == "disabled":
         return ""
     value = _value(properties, prefix, "ros_domain_id")
     if not value:

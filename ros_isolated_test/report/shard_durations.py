@@ -86,7 +86,7 @@ def _runner_test(item: FileRead) -> list[tuple[str, float | None]]:
         return []
     properties = suite.properties
     seconds = None
-    if properties.get("exit") == "not run":
+    if properties.get(names.EXIT) == "not run":
         pass
     elif DURATION_PROPERTY in properties:
         seconds = _seconds(properties[DURATION_PROPERTY])

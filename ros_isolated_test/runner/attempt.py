@@ -11,6 +11,7 @@ import os
 import shlex
 import time
 
+from ros_isolated_test import names
 from ros_isolated_test.domain_coordinator.pool import id_ranges
 from ros_isolated_test.process import supervisor
 from ros_isolated_test.runner.isolation import isolation, leftover_note
@@ -99,12 +100,12 @@ def attempt(
         for leftover in outcome.leftovers:
             capture.note(leftover_note(leftover))
         if outcome.leftovers:
-            result.properties["leftover_processes"] = ", ".join(outcome.leftovers)
+            result.properties[names.LEFTOVER_PROCESSES] = ", ".join(outcome.leftovers)
         survivors = [survivor.describe() for survivor in outcome.survivors]
         for survivor in survivors:
             capture.note(f"process {survivor} of the test could not be ended (SIGKILL failed)")
         if survivors:
-            result.properties["surviving_processes"] = ", ".join(survivors)
+            result.properties[names.SURVIVING_PROCESSES] = ", ".join(survivors)
     return outcome, domain_id
 
 

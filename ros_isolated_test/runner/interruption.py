@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 
+from ros_isolated_test import names
 from ros_isolated_test.process import signals
 from ros_isolated_test.runner import exit_codes
 
@@ -57,7 +58,7 @@ class Guard:
     def note_late(self) -> None:
         """The test had ended: the run's outcome stands, the signal is only noted."""
         if self.late is not None and self.result is not None:
-            self.result.properties["signal_after_test"] = exit_codes.signal_name(self.late)
+            self.result.properties[names.SIGNAL_AFTER_TEST] = exit_codes.signal_name(self.late)
 
 
 @contextlib.contextmanager

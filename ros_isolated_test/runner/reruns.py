@@ -10,6 +10,7 @@ the series.
 
 from __future__ import annotations
 
+from ros_isolated_test import names
 from ros_isolated_test.not_run import NotRun
 from ros_isolated_test.runner import environment, exit_codes
 from ros_isolated_test.runner.attempt import attempt
@@ -73,12 +74,12 @@ def reruns(
             outcome, domain_id = attempt(request, number, policy, config, result, capture, guard)
         except NotRun as error:
             capture.note(f"attempt {number} did not run: {error}")
-            result.properties["rerun_not_run"] = str(error)
+            result.properties[names.RERUN_NOT_RUN] = str(error)
             break
         except Interrupted as interruption:
             name = exit_codes.signal_name(interruption.signum)
             capture.note(f"attempt {number} did not run: interrupted by {name}")
-            result.properties["signal_after_test"] = name
+            result.properties[names.SIGNAL_AFTER_TEST] = name
             break
     if result.attempts_written < 2 or result.path is None:
         if number > ran:

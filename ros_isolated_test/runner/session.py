@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 
+from ros_isolated_test import names
 from ros_isolated_test.atomic_file import SPECIAL_FIX, NotReplaceableError
 from ros_isolated_test.not_run import NotRun
 from ros_isolated_test.runner import environment, exit_codes, settings, shard, streams
@@ -155,7 +156,7 @@ def _attempted(
     except Interrupted as interruption:
         name = exit_codes.signal_name(interruption.signum)
         message = f"interrupted by {name} before the test started (it never ran)"
-        result.properties["signal_received"] = name
+        result.properties[names.SIGNAL_RECEIVED] = name
         return _not_run(
             result, console, message, Outcome.ERROR, exit_codes.for_signal(interruption.signum)
         )
@@ -165,7 +166,7 @@ def _attempted(
         code = reruns(request, policy, config, result, both, guard, base, outcome, domain_id)
     else:
         code = conclude(request, result, both.capture, outcome)
-    if guard.late is not None and "signal_after_test" not in result.written:
+    if guard.late is not None and names.SIGNAL_AFTER_TEST not in result.written:
         # It came while the final word was being written: written again, saying so.
         result.rewrite()
     return code
@@ -199,7 +200,7 @@ def _never_ran(result: ResultFile, console: BinaryIO, error: NotRun) -> int:
 
 def _not_run(result: ResultFile, console: BinaryIO, message: str, kind: Outcome, code: int) -> int:
     # The result file first: after a Ctrl-C the console may already be gone.
-    result.properties["exit"] = "not run"
+    result.properties[names.EXIT] = "not run"
     result.write([result.case(kind, message)])
     streams.error(console, message)
     return code

@@ -7,6 +7,7 @@ result file says what the console said.
 
 from __future__ import annotations
 
+from ros_isolated_test import names
 from ros_isolated_test.runner import environment, partition
 
 TYPE_CHECKING = False  # no typing import on a test's path
@@ -97,7 +98,7 @@ def summary(
     lines: list[str] = []
     properties: dict[str, str] = {}
     if domain_id is not None:
-        properties["ros_domain_id"] = str(domain_id)
+        properties[names.DOMAIN_ID] = str(domain_id)
         if policy.discovery is not None:
             lines.append(policy.discovery.describe())
             if not policy.namespaces:  # in namespaces, static peers are loopback only
@@ -117,8 +118,8 @@ def summary(
             lines.extend(config.notes)
             properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
     else:
-        properties["ros_domain_id"] = policy.env.get(environment.DOMAIN_VAR, "unset (0)")
-        properties["isolation"] = "disabled"
+        properties[names.DOMAIN_ID] = policy.env.get(environment.DOMAIN_VAR, "unset (0)")
+        properties[names.ISOLATION_PROPERTY] = "disabled"
         preset = [policy.env[name] for name in partition.VARIABLES if name in policy.env]
         properties[partition.PROPERTY] = preset[0] if preset else "unset"
     lines.extend(policy.notes)
@@ -146,14 +147,14 @@ def isolation_summary(
         mode = "namespace" if policy.mode == "namespace" else "namespace (auto)"
         properties = {"isolation": mode}
         if reserved:
-            properties["ros_domain_id_reserved"] = "yes"
+            properties[names.ROS_DOMAIN_ID_RESERVED] = "yes"
         else:
             why = "no ID of the pool is free (in use, or waited for by queued runners)"
             lines.append(
                 f"ROS_DOMAIN_ID {domain_id} is not reserved: {why}; the test runs at once "
                 "on it, isolated by its namespaces"
             )
-            properties["ros_domain_id_reserved"] = f"no: {why}; the namespaces isolate the test"
+            properties[names.ROS_DOMAIN_ID_RESERVED] = f"no: {why}; the namespaces isolate the test"
         return lines, properties
     if policy.fallback is not None:
         return (

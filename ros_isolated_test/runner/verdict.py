@@ -7,6 +7,7 @@ file, the output's tail) and has the result file write the word they decide.
 
 from __future__ import annotations
 
+from ros_isolated_test import names
 from ros_isolated_test.runner import exit_codes
 from ros_isolated_test.runner.request import Mode
 from ros_isolated_test.xunit.model import Case, Outcome
@@ -30,12 +31,12 @@ def conclude(
 ) -> int:
     """Turn how the test ended into the result file and the exit code (rules: exit_codes)."""
     code, reason = exit_codes.ended(outcome, request.mode is Mode.AMENT, request.timeout)
-    result.properties["exit"] = reason
+    result.properties[names.EXIT] = reason
     if outcome.returncode is not None and outcome.returncode >= 0:
-        result.properties["exit_code"] = str(outcome.returncode)
+        result.properties[names.EXIT_CODE] = str(outcome.returncode)
     if outcome.signal is not None:
-        result.properties["signal"] = exit_codes.signal_name(outcome.signal)
-    result.properties["duration"] = f"{outcome.duration:.3f}"
+        result.properties[names.SIGNAL] = exit_codes.signal_name(outcome.signal)
+    result.properties[names.DURATION] = f"{outcome.duration:.3f}"
     if outcome.start_error is not None:
         capture.note(f"invocation failed: {outcome.start_error}")
     capture.note(f"the test {reason}")
@@ -112,9 +113,9 @@ def _adopt(
 def streams_noted(result: ResultFile, capture: OutputCapture) -> None:
     """What went wrong with the output file (fails a pass) or the console (never does)."""
     if capture.file_error is not None:
-        result.properties["output_file_error"] = capture.file_error
+        result.properties[names.OUTPUT_FILE_ERROR] = capture.file_error
     if capture.console_error is not None:
-        result.properties["console_error"] = capture.console_error
+        result.properties[names.CONSOLE_ERROR] = capture.console_error
 
 
 def _output_lost_case(result: ResultFile, capture: OutputCapture, output_file: Path | None) -> Case:

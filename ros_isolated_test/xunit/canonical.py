@@ -9,7 +9,7 @@ them.
 
 from __future__ import annotations
 
-from ros_isolated_test import atomic_file
+from ros_isolated_test import atomic_file, names
 from ros_isolated_test.xunit import validate
 from ros_isolated_test.xunit.model import Suite
 
@@ -51,7 +51,7 @@ def normalise_file(path: Path, package: str, test_name: str) -> tuple[bytes, boo
     cases, read = read_cases(path, package, test_name)
     properties = {"original_result_file": path.name}
     if read.repairs:
-        properties["result_file_repairs"] = "; ".join(read.repairs)
+        properties[names.RESULT_FILE_REPAIRS] = "; ".join(read.repairs)
     suite = Suite(
         name=f"{package}.{test_name}",
         cases=cases,

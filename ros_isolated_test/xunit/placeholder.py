@@ -141,7 +141,7 @@ class StandIn:
         cases: Sequence[Case],
         earlier: Sequence[Suite] = (),
     ) -> None:
-        ended = properties.get("exit")
+        ended = properties.get(names.EXIT)
         if ended == "not run":
             how = "The test did not run."
         elif ended:
@@ -157,7 +157,7 @@ class StandIn:
         self._properties = {
             key: properties[key] for key in _STAND_IN_PROPERTIES if key in properties
         }
-        self._properties["result_write_error"] = reason
+        self._properties[names.RESULT_WRITE_ERROR] = reason
         self._reason = reason
         self._suite = suite
         self._earlier = tuple(earlier)

@@ -272,7 +272,7 @@ class ResultFile:
 
         # Taken whole: what is written from now on stands beside no earlier attempt.
         merged, self._attempts = merge_attempts(self._attempts), []
-        merged.properties["ros_domain_ids"] = ", ".join(domain_ids)
+        merged.properties[names.ROS_DOMAIN_IDS] = ", ".join(domain_ids)
 
         def build(properties: dict[str, str]) -> Suite:
             for name, value in properties.items():
@@ -430,7 +430,7 @@ class ResultFile:
         cases, read = read_cases(source, self.package, self.test_name, self.path)
         self.problems = read.problems + read.repairs
         if read.repairs:
-            self.properties["result_file_repairs"] = "; ".join(read.repairs)
+            self.properties[names.RESULT_FILE_REPAIRS] = "; ".join(read.repairs)
         if os.path.lexists(source):
             try:
                 if beside:
@@ -442,10 +442,10 @@ class ResultFile:
             except OSError as error:
                 problem = f"cannot keep the test's own file as {self.original}: {_reason(error)}"
                 self.problems.append(problem)
-                self.properties["original_result_file_error"] = problem
+                self.properties[names.ORIGINAL_RESULT_FILE_ERROR] = problem
             else:
                 self._adopted, self._beside = True, beside
-                self.properties["original_result_file"] = self.original.name
+                self.properties[names.ORIGINAL_RESULT_FILE] = self.original.name
         if self.in_place and not beside:
             said = (
                 f"no argument of the command names {self.path.name}, so the test wrote it "
