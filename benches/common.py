@@ -22,6 +22,9 @@ from pathlib import Path
 from typing import IO
 
 REPO = Path(__file__).resolve().parent.parent
+#: Every colcon a benchmark starts builds the way its row says (the include passed, or
+#: nothing of ours): ros-isolated-test's colcon extension, installed in this venv, stays off.
+os.environ.setdefault("ROS_ISOLATED_TEST_COLCON", "off")
 #: Ours and Jazzy's upstream, both under the Jazzy venv (the interpreter running this).
 OURS = "ours"
 UPSTREAM = "upstream"

@@ -9,6 +9,14 @@ with durations files of 1,000 and 10,000 tests (about 30 KB and 300 KB). Wall ti
 over the imports alone, medians, interleaved; and, inside the process, where the time
 goes (reading the file, planning, the fingerprint). Ours only: upstream has no split.
 
+Then what a machine of a split pays for the other shares' tests, as a new user meets it:
+one ament_cmake package of 120 no-op ``ament_add_test`` tests (``--quick``: 40) through
+the zero-edit include, ``colcon test --ctest-args -j1`` whole, as share 1/4
+(``ROS_ISOLATED_TEST_SHARD``), and an ament_cmake package with no tests, best of 3
+(``--quick``: 2). The share's fair part is the empty package's wall plus its share of the
+tests' cost: ``empty + k/n x (whole - empty)`` for k of the n tests; its wall over that
+part must be at most 1.10 (ctest disables the other shares' tests, no RUNNER starts).
+
 Run alone: ``python benches/shard_cost.py`` (``--quick``: fewer runs).
 """
 
@@ -23,15 +31,34 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from common import BOOTSTRAP_MARK, Context, Section, median, ms, progress, run_timed
+from common import BOOTSTRAP_MARK, REPO, Context, Section, median, ms, progress, run_timed
 
 from ros_isolated_test.shard.durations import measured, write
+from ros_isolated_test.shard.selection import select
+
+sys.path.insert(0, str(REPO / "examples"))
+import crosstalk_workspace
 
 BASELINE = "ros_isolated_test.ament.args"
 #: Tests in each durations file measured; 0: no file (by count).
 SIZES = (0, 1_000, 10_000)
 #: The target: what a 10,000-test file may add to a test, at most.
 TARGET_SECONDS = 0.030
+#: The package of no-op tests (--quick: fewer), the share measured, and its target: the
+#: share's wall over its fair part.
+PACKAGE_TESTS = 120
+QUICK_PACKAGE_TESTS = 40
+PACKAGE_SHARE = "1/4"
+PACKAGE_TARGET = 1.10
+MANIFEST = """<?xml version="1.0"?>
+<package format="3">
+  <name>{name}</name><version>0.1.0</version><description>No-op tests.</description>
+  <maintainer email="maintainer@example.com">Example Maintainer</maintainer>
+  <license>Apache-2.0</license>
+  <buildtool_depend>ament_cmake</buildtool_depend>
+  <export><build_type>ament_cmake</build_type></export>
+</package>
+"""
 _ASK = """
 import os, time
 import {baseline}
@@ -124,9 +151,94 @@ def measure(python: str, base_env: Mapping[str, str], quick: bool, work: Path) -
     return section
 
 
+def _package(src: Path, name: str, count: int) -> None:
+    """An ament_cmake package of ``count`` no-op tests that name no runner."""
+    folder = src / name
+    folder.mkdir(parents=True)
+    (folder / "package.xml").write_text(MANIFEST.format(name=name))
+    tests = "".join(
+        f"  ament_add_test(t_{n} COMMAND true GENERATE_RESULT_FOR_RETURN_CODE_ZERO)\n"
+        for n in range(count)
+    )
+    (folder / "CMakeLists.txt").write_text(
+        f"cmake_minimum_required(VERSION 3.15)\nproject({name} NONE)\n"
+        f"find_package(ament_cmake REQUIRED)\nif(BUILD_TESTING)\n{tests}endif()\nament_package()\n"
+    )
+
+
+def package_share(python: str, base_env: Mapping[str, str], quick: bool, work: Path) -> list[str]:
+    """The package of no-op tests whole, as one share, and an empty package: note lines."""
+    count = QUICK_PACKAGE_TESTS if quick else PACKAGE_TESTS
+    reps = 2 if quick else 3
+    root = work / "package_share"
+    _package(root / "src", "noop_tests", count)
+    _package(root / "src", "no_tests", 0)
+    env = crosstalk_workspace.colcon_env(crosstalk_workspace.Toolchain(base_env=dict(base_env)))
+    for name in ("ROS_ISOLATED_TEST_SHARD", "ROS_ISOLATED_TEST_DURATIONS", "PYTHONPATH"):
+        env.pop(name, None)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env.pop("COLCON_DEFAULTS_FILE", None)
+    env["COLCON_HOME"] = str(root / "colcon-home")
+    include = subprocess.run(
+        [python, "-m", "ros_isolated_test", "cmake-include"], env=env,
+        capture_output=True, text=True, check=True, timeout=60,
+    ).stdout.strip()  # fmt: skip
+    progress(f"shard cost: a package of {count} no-op tests, colcon build")
+    built = subprocess.run(
+        ["colcon", "build", "--cmake-args", f"-DCMAKE_PROJECT_INCLUDE={include}",
+         f"-DPython3_EXECUTABLE={python}"],
+        cwd=root, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        check=False,
+    )  # fmt: skip
+    if built.returncode != 0:
+        raise RuntimeError(f"colcon build failed:\n{built.stdout[-4000:]}")
+    runs = {
+        "whole package": ("noop_tests", {}),
+        f"share {PACKAGE_SHARE}": ("noop_tests", {"ROS_ISOLATED_TEST_SHARD": PACKAGE_SHARE}),
+        "empty package": ("no_tests", {}),
+    }
+
+    def once(package: str, extra: Mapping[str, str]) -> float:
+        command = ["colcon", "test", "--packages-select", package, "--ctest-args", "-j1"]
+        return run_timed(command, {**env, **extra}, cwd=root).seconds
+
+    for package, extra in runs.values():  # warm-up
+        once(package, extra)
+    walls: dict[str, list[float]] = {label: [] for label in runs}
+    progress(f"shard cost: the package whole, as share {PACKAGE_SHARE}, empty: {reps} runs each")
+    for rep in range(reps):
+        for label in runs if rep % 2 == 0 else list(reversed(runs)):
+            walls[label].append(once(*runs[label]))
+    best = {label: min(values) for label, values in walls.items()}
+    selection = select({"ROS_ISOLATED_TEST_SHARD": PACKAGE_SHARE})
+    assert selection is not None
+    share_tests = sum(selection.runs("noop_tests", f"t_{n}") for n in range(count))
+    empty, whole = best["empty package"], best["whole package"]
+    fair = empty + share_tests / count * (whole - empty)
+    over = best[f"share {PACKAGE_SHARE}"] / fair
+    said = "met" if over <= PACKAGE_TARGET else f"**NOT met** (by {over / PACKAGE_TARGET - 1:.0%})"
+    return [
+        "",
+        f"A split machine's share of one package ({count} no-op `ament_add_test`s, zero-edit "
+        f"include, `colcon test --ctest-args -j1`, best of {reps}):",
+        "",
+        "| run | tests run | wall |",
+        "|---|---|---|",
+        f"| whole package | {count} | {whole:.2f} s |",
+        f"| share {PACKAGE_SHARE} | {share_tests} | {best[f'share {PACKAGE_SHARE}']:.2f} s |",
+        f"| empty package | 0 | {empty:.2f} s |",
+        "",
+        f"The share's fair part: {empty:.2f} s + {share_tests}/{count} x ({whole:.2f} s - "
+        f"{empty:.2f} s) = {fair:.2f} s; its wall is {over:.2f} x that. Target: at most "
+        f"{PACKAGE_TARGET:.2f} x: {said}.",
+    ]
+
+
 def run(ctx: Context) -> Section:
     """For benches/run.py: this venv's interpreter and environment, the run's scratch."""
-    return measure(ctx.python, ctx.env, ctx.quick, ctx.scratch("shard_cost"))
+    section = measure(ctx.python, ctx.env, ctx.quick, ctx.scratch("shard_cost"))
+    section.notes += package_share(ctx.python, ctx.env, ctx.quick, ctx.scratch("shard_cost"))
+    return section
 
 
 def main() -> None:
@@ -134,7 +246,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer runs")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as work:
-        print(measure(sys.executable, dict(os.environ), args.quick, Path(work)).render())
+        section = measure(sys.executable, dict(os.environ), args.quick, Path(work))
+        section.notes += package_share(sys.executable, dict(os.environ), args.quick, Path(work))
+        print(section.render())
 
 
 if __name__ == "__main__":

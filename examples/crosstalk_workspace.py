@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -21,8 +22,14 @@ from pathlib import Path
 
 PACKAGE = "crosstalk_demo"
 PACKAGE_DIR = Path(__file__).resolve().parent / PACKAGE
-RUNNERS = ("isolated", "plain", "upstream")
+RUNNERS = ("isolated", "plain", "upstream", "extension", "off")
+#: The runs as a user meets them: the package as written (no RUNNER named) in a workspace's
+#: src/, a plain `colcon build` and `colcon test`, ros-isolated-test's colcon extension on
+#: (installed where colcon runs) or turned off: ROS_ISOLATED_TEST_COLCON for each.
+COLCON_SWITCH = {"extension": "on", "off": "off"}
 DEFAULT_JOBS = 6
+#: The last line of `colcon test` with the extension on, naming the page it wrote.
+_PAGE = re.compile(r"^ros-isolated-test: .*; page: (.+)$", re.MULTILINE)
 
 _SUMMARY = re.compile(
     r"^Summary: (\d+) tests?, (\d+) errors?, (\d+) failures?, (\d+) skipped", re.MULTILINE
@@ -94,6 +101,28 @@ def isolated_runner_problem(toolchain: Toolchain = THIS_PYTHON) -> str | None:
     return None
 
 
+def extension_problem(toolchain: Toolchain = THIS_PYTHON) -> str | None:
+    """Say why colcon would not load ros-isolated-test's colcon extension, or None if it would.
+
+    What a user checks: `colcon extensions` lists it (``ros-isolated-test status`` says
+    the same for the colcon on PATH).
+    """
+    try:
+        code, output = _colcon(
+            ["--log-base", os.devnull, "extensions"], cwd=PACKAGE_DIR, toolchain=toolchain
+        )
+    except FileNotFoundError:
+        return "no colcon on PATH"
+    if code != 0:
+        return f"`colcon extensions` exited {code}:\n{output}"
+    if "ros_isolated_test:" not in output:
+        return (
+            "`colcon extensions` does not list ros_isolated_test: install ros-isolated-test "
+            "into colcon's Python (see docs/install.md)"
+        )
+    return None
+
+
 @dataclass(frozen=True)
 class Record:
     """What one token_talker process wrote about itself (CROSSTALK_RECORD_DIR/<token>.json)."""
@@ -143,6 +172,12 @@ class Run:
     result: ResultSummary
 
     @property
+    def page(self) -> Path | None:
+        """The page the colcon extension's last line names (None: it named none)."""
+        found = _PAGE.findall(self.test_output)
+        return (self.base / found[-1]) if found else None
+
+    @property
     def domain_ids(self) -> list[str | None]:
         return [c.record.domain_id if c.record else None for c in self.cases]
 
@@ -183,12 +218,19 @@ def build(workspace: Path, runner: str, toolchain: Toolchain = THIS_PYTHON) -> P
     """Configure and build the package for one runner in <workspace>/<runner>; return that dir.
 
     Each runner gets its own build dir because the runner is baked into CTestTestfile.cmake
-    at configure time.
+    at configure time. The colcon extension's runs (:data:`COLCON_SWITCH`) are a workspace
+    as a user has one: the package copied into its src/, `colcon build` run there, no flag.
     """
     if runner not in RUNNERS:
         raise ValueError(f"runner must be one of {RUNNERS}, not {runner!r}")
     base = workspace / runner
     base.mkdir(parents=True, exist_ok=True)
+    if runner in COLCON_SWITCH:
+        shutil.copytree(PACKAGE_DIR, base / "src" / PACKAGE, dirs_exist_ok=True)
+        code, output = _colcon(["build"], cwd=base, extra_env=_switch(runner), toolchain=toolchain)
+        if code != 0:
+            raise WorkspaceError(f"colcon build ({runner}) failed:\n{output}")
+        return base
     cmake_args = [f"-DCROSSTALK_RUNNER={runner}", f"-DPython3_EXECUTABLE={toolchain.python}"]
     code, output = _colcon(
         ["--log-base", str(base / "log"), "build", *_common(base), "--cmake-args", *cmake_args],
@@ -198,6 +240,11 @@ def build(workspace: Path, runner: str, toolchain: Toolchain = THIS_PYTHON) -> P
     if code != 0:
         raise WorkspaceError(f"colcon build with CROSSTALK_RUNNER={runner} failed:\n{output}")
     return base
+
+
+def _switch(runner: str) -> dict[str, str]:
+    """ROS_ISOLATED_TEST_COLCON for a run of the colcon extension (none for the others)."""
+    return {"ROS_ISOLATED_TEST_COLCON": COLCON_SWITCH[runner]} if runner in COLCON_SWITCH else {}
 
 
 def registered_tests(base: Path) -> tuple[str, dict[str, str]]:
@@ -254,10 +301,13 @@ def run(
     record_dir.mkdir(exist_ok=True)
     for old in record_dir.glob("*.json"):
         old.unlink()
+    test_args = ["--log-base", str(base / "log"), "test", *_common(base)]
+    if runner in COLCON_SWITCH:
+        test_args = ["test"]  # in the workspace, as a user types it
     _, test_output = _colcon(
-        ["--log-base", str(base / "log"), "test", *_common(base), "--ctest-args", f"-j{jobs}"],
-        cwd=workspace,
-        extra_env={"CROSSTALK_RECORD_DIR": str(record_dir)},
+        [*test_args, "--ctest-args", f"-j{jobs}"],
+        cwd=base if runner in COLCON_SWITCH else workspace,
+        extra_env={"CROSSTALK_RECORD_DIR": str(record_dir), **_switch(runner)},
         toolchain=toolchain,
     )
     tested = time.monotonic()

@@ -4,10 +4,20 @@
 # Debian when missing, xunit-viewer from npm into node_modules, then ros-isolated-test
 # with real ROS 2 Jazzy, ament_cmake and colcon from PyPI into .venv, and with ROS 2
 # Kilted into .venv-kilted.
+# --demo installs only what scripts/demo.sh runs: cmake and make, and ros-isolated-test
+# with ROS 2 Jazzy, ament_cmake and colcon in .venv (no dev tools, no Kilted, distro or
+# coordinator venvs, no Docker, Debian packaging, Chromium or npm); a later run without it
+# adds the rest.
 # Safe to run again: it only installs again when pyproject.toml changed.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$root"
+mode=all
+case ${1:-} in
+  --demo) mode=demo ;;
+  "") ;;
+  *) echo "setup: unknown argument $1; use no argument (everything) or --demo" >&2; exit 2 ;;
+esac
 
 # The distribution's Python 3.11 when it has one: every user can run it, so the tests
 # can start runners as other users (the shared lock directory's multi-user cases); a
@@ -23,6 +33,20 @@ if ! command -v "$python" >/dev/null 2>&1; then
 fi
 
 missing=()
+if [[ $mode == demo ]]; then
+  # The demo's package is CMake with no compiled code: cmake, ctest and make are all it builds with.
+  for tool in cmake ctest make; do
+    command -v "$tool" >/dev/null 2>&1 || missing+=("$tool")
+  done
+  if ((${#missing[@]})); then
+    echo "setup: installing system packages for: ${missing[*]}"
+    sudo=""
+    [[ $(id -u) -ne 0 ]] && sudo=sudo
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq cmake make >/dev/null
+  fi
+  missing=()
+else  # everything the test suite needs, to "fi  # mode"
 for tool in cmake ctest make g++ unshare; do
   command -v "$tool" >/dev/null 2>&1 || missing+=("$tool")
 done
@@ -73,8 +97,17 @@ if [[ ! -f $npm_stamp ]]; then
   npm ci --no-audit --no-fund --loglevel=error
   touch "$npm_stamp"
 fi
+fi  # mode
 
-stamp=.venv/.installed-$(sha256sum pyproject.toml | cut -c1-16)
+# Everything (the ros and dev extras) or the demo's part (the ros extra): a full install
+# serves the demo too; a demo install is completed by the next full run.
+hash=$(sha256sum pyproject.toml | cut -c1-16)
+stamp=.venv/.installed-$hash
+extras=ros,dev
+if [[ $mode == demo ]]; then
+  [[ -f $stamp ]] || stamp=.venv/.installed-demo-$hash
+  extras=ros
+fi
 if [[ ! -f $stamp ]]; then
   echo "setup: installing ros-isolated-test, ROS 2 Jazzy, ament_cmake and colcon into .venv (about a minute)"
   # Reuse an existing .venv: pip only adds what changed, and a running test keeps working.
@@ -82,7 +115,7 @@ if [[ ! -f $stamp ]]; then
   # pip's output goes to a log, shown only when the install fails.
   log=.venv/install.log
   if ! { .venv/bin/python -m pip install -q --upgrade pip &&
-         .venv/bin/python -m pip install -q -e ".[ros,dev]"; } >"$log" 2>&1; then
+         .venv/bin/python -m pip install -q -e ".[$extras]"; } >"$log" 2>&1; then
     grep -v '^WARNING: Location' "$log" >&2
     echo "setup: pip install failed (full log: $log)" >&2
     exit 1
@@ -92,6 +125,8 @@ if [[ ! -f $stamp ]]; then
   touch "$stamp"
 fi
 
+# The demo needs no more than .venv (and the CMake package linked below).
+if [[ $mode == all ]]; then
 # ROS 2 Kilted beside Jazzy, in a venv of its own (the wheels of two distros cannot share
 # one): the Kilted tier of the test suite and the benchmarks against Kilted's runner use
 # it. ROS_ISOLATED_TEST_NO_KILTED=1 leaves it out (that tier then says it was skipped).
@@ -151,6 +186,8 @@ print("\n".join(tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-
   rm -f .venv-distro/.installed-*
   touch "$distro_stamp"
 fi
+
+fi  # mode
 
 # An editable install does not copy data files: CMake's find_package(ros_isolated_test)
 # looks for the package config under .venv/share, next to .venv/bin on PATH.

@@ -1,6 +1,8 @@
 # ros_isolated_test_all([RERUNS n] [RESOURCES spec]): one line that puts every test of the
 # package on our RUNNER (each with ctest's SKIP_RETURN_CODE 77 unless it has a skip code
-# of its own: a test of another share of a split is shown as skipped); with RERUNS, each of them runs again up to n times when it fails
+# of its own: a test of another share of a split that reaches the RUNNER is shown as
+# skipped; ctest does not even start one it was told about: ros_isolated_test_share.cmake);
+# with RERUNS, each of them runs again up to n times when it fails
 # (every attempt kept in its result file), unless its own ENV sets ROS_ISOLATED_TEST_RERUNS;
 # with RESOURCES (e.g. cpu=2,mem=4G, or a CMake list "cpu=2;mem=4G"), each of them holds
 # those machine resources with its domain ID (waiting until they are free), unless its own
@@ -44,6 +46,8 @@
 #   that run through run_test.py again (the status line names them).
 
 include("${CMAKE_CURRENT_LIST_DIR}/ros_isolated_test_package.cmake")
+# A split machine starts only its own share's tests: each test put on our RUNNER is listed.
+include("${CMAKE_CURRENT_LIST_DIR}/ros_isolated_test_share.cmake")
 
 macro(ros_isolated_test_all)
   if(NOT COMMAND ament_add_test)
@@ -125,6 +129,7 @@ function(_ros_isolated_test_wrap_ament_add_test)
       # and upstream's (cmake_parse_arguments keeps the last value).
       _ament_add_test("${testname}" ${_default_env} ${ARGN} RUNNER "${_runner}")
       _ros_isolated_test_skip_codes("${_before}")
+      _ros_isolated_test_share_register("${testname}" "${_rit_RESULT_FILE}")
     else()
       # Another runner: RERUNS and RESOURCES are ours, not its.
       _ament_add_test("${testname}" ${ARGN})
@@ -253,6 +258,8 @@ function(_ros_isolated_test_summary)
   get_property(_taken_over GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_TAKEN_OVER)
   get_property(_kept GLOBAL PROPERTY _ROS_ISOLATED_TEST_ALL_KEPT)
   _ros_isolated_test_tests_below(_tests _discovered "${_root}")
+  # Our own TEST_INCLUDE_FILES script (a split's) discovers no test.
+  _ros_isolated_test_share_foreign_includes(_discovered ${_discovered})
   set(_testing_off FALSE)
   if(DEFINED BUILD_TESTING AND NOT BUILD_TESTING)
     set(_testing_off TRUE)

@@ -1,7 +1,8 @@
 # ros_isolated_add_*: the ament and launch_testing test macros with ros-isolated-test as
 # RUNNER. Each test they register gets ctest's SKIP_RETURN_CODE 77 unless it has a skip
 # code of its own: in a split over machines (ROS_ISOLATED_TEST_SHARD=I/N) the RUNNER exits
-# 77 for a test of another share, which ctest then shows as skipped.
+# 77 for a test of another share, which ctest then shows as skipped. Each is also listed
+# for ros_isolated_test_share.cmake, so that ctest does not start the other shares' tests.
 # Each takes exactly the arguments of the macro it wraps, and two more:
 # RERUNS <n> runs a failed test again up to n times, every attempt kept in its result file
 # (ENV ROS_ISOLATED_TEST_RERUNS=<n>, which the RUNNER reads);
@@ -11,6 +12,8 @@
 # (ENV ROS_ISOLATED_TEST_RESOURCES=<spec>, which the RUNNER checks).
 # Our RUNNER comes first, so a RUNNER the call names itself comes later and wins
 # (cmake_parse_arguments keeps the last value).
+
+include("${CMAKE_CURRENT_LIST_DIR}/ros_isolated_test_share.cmake")
 
 # The RUNNER script's path, wherever find_package(ros_isolated_test) was called.
 function(_ros_isolated_test_runner var)
@@ -173,6 +176,10 @@ macro(_ros_isolated_test_add _ros_isolated_test_command _ros_isolated_test_packa
     ament_add_test("${_ros_isolated_test_first}" ${_ros_isolated_test_arguments})
   endif()
   _ros_isolated_test_skip_codes("${_ros_isolated_test_before}")
+  # Listed for a split (ros_isolated_test_share.cmake), unless ros_isolated_test_all()'s
+  # wrapper of ament_add_test, which sees the result file given, listed it already.
+  _ros_isolated_test_share_register_new("${_ros_isolated_test_before}"
+    ${_ros_isolated_test_command} ${_ros_isolated_test_arguments})
 endmacro()
 
 # ros_isolated_add_test(testname COMMAND ... [RERUNS n] [RESOURCES spec]

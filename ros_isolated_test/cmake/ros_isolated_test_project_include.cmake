@@ -26,6 +26,8 @@
 # anyway (an ament_add_test outside if(BUILD_TESTING)): those are isolated too, and said
 # to be; where no runner can be found then, they are named as NOT isolated instead of
 # failing a build that was not meant to test.
+# In a split (ROS_ISOLATED_TEST_SHARD=I/N when ctest runs) ctest does not start the
+# other shares' tests (ros_isolated_test_share.cmake).
 # Off: -DROS_ISOLATED_TEST_ALL=OFF (for one package: a colcon.meta entry, or that
 # package's cached value); the package's own ros_isolated_test_all() or macros still
 # apply then.

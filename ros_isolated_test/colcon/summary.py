@@ -25,13 +25,18 @@ PREFIX = "ros-isolated-test:"
 
 
 class DomainIds:
-    """The distinct domain IDs the result files say their tests held (ours, isolated)."""
+    """The distinct domain IDs the result files say their tests held (ours, isolated).
+
+    Only result files with cases count: a pytest session with ``ROS_ISOLATED_TEST_SHARD`` set
+    whose items are all another machine's still holds an ID, and says so, for none.
+    """
 
     def __init__(self) -> None:
         self.ids: set[int] = set()
 
     def add(self, item: FileRead) -> None:
-        if item.read is None:
+        # A session that ran none of its tests (another machine's share) held an ID for none.
+        if item.read is None or not (item.read.cases or item.read.dropped):
             return
         for suite in item.read.suites:
             if suite.properties.get(names.ISOLATION_PROPERTY) == "disabled":

@@ -19,6 +19,7 @@ then isolates the same build again without cleaning it.
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -29,9 +30,9 @@ from pathlib import Path
 import pytest
 from helpers import capabilities, chromium
 from helpers.cmake_package import build_wheel
-from helpers.commands import REPO
+from helpers.commands import REPO, run_cli
 from helpers.domains import free_ids
-from helpers.report_page import page_totals
+from helpers.report_page import page_totals, parsed, timeline_bars, timeline_rows
 from helpers.workspace import crosstalk_workspace
 from lxml import etree
 
@@ -54,6 +55,8 @@ SUMMARY = re.compile(
 )
 #: The suite's venv, where the project is installed (editable).
 VENV = Path(sys.prefix)
+#: The page the Chromium test draws, kept as a CI artifact.
+ARTIFACT = chromium.ARTIFACTS / "colcon_extension" / "page.png"
 NOT_ISOLATED = "are NOT isolated: ros-isolated-test is no longer installed"
 
 
@@ -177,12 +180,18 @@ def test_plain_colcon_test_isolates_every_test_and_names_its_page(
 
 @capabilities.CHROMIUM.mark
 def test_the_page_opens_in_chromium_with_every_test(workspace: Path) -> None:
+    """The page as a person sees it: the DOM after its scripts ran, and a screenshot kept."""
     page = workspace / "log" / "latest_test" / "ros_isolated_test.html"
     dom = chromium.dump_dom(page)
-    assert page_totals(dom).get("passed") == 7
+    assert page_totals(dom) == {"tests": 7, "passed": 7}, page_totals(dom)
     shown = etree.tostring(dom, encoding="unicode")
     for token in ("ivy", "juniper", "kale", *SECOND[1]):
         assert f"talker_{token}" in shown
+    assert "zero_edit_py" in shown  # the ament_python package's pytest item
+    assert len(timeline_bars(dom)) == 7  # one bar per test, each drawn on its own ID
+    assert len(timeline_rows(dom)) == 7
+    chromium.screenshot(page, ARTIFACT, size=(1400, 1300))
+    assert ARTIFACT.read_bytes().startswith(b"\x89PNG")
 
 
 @capabilities.COLCON_COORDINATOR.mark
@@ -197,6 +206,61 @@ def test_with_colcons_coordinator_too_every_test_still_has_its_own_id(
     output, ids = _tested(workspace, env)
     _each_on_its_own(ids, output)
     assert SUMMARY.search(output), output[-2000:]
+
+
+SHARE_SUMMARY = re.compile(
+    r"^ros-isolated-test: (\d+) tests run, (\d+) failed, (\d+) flaky, on (\d+) domain IDs "
+    r"\(this machine's share (\d)/2\); page: (.+)$",
+    re.M,
+)
+
+
+def _tree_of_share(workspace: Path, tree: Path) -> Path:
+    """This run's results, copied as a CI machine uploads them (its records then go)."""
+    build = workspace / "build"
+    for found in build.glob("*/test_results/**/*"):
+        if found.is_file():
+            (tree / found.relative_to(build)).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(found, tree / found.relative_to(build))
+    for found in [*build.glob("*/pytest.xml"), *build.glob("**/ros_isolated_test_shard-*.json")]:
+        (tree / found.relative_to(build)).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(found, tree / found.relative_to(build))
+    for stale in build.glob("**/ros_isolated_test_shard-*.json"):
+        stale.unlink()
+    return tree
+
+
+@pytest.mark.usefixtures("built")
+def test_with_a_share_set_the_line_and_page_are_this_machines_and_the_merge_is_unchanged(
+    workspace: Path, pool_env: dict[str, str], tmp_path: Path
+) -> None:
+    """ROS_ISOLATED_TEST_SHARD=I/2 on two machines (one after another on the one build):
+    each line and page count that share's tests alone and say the share; ``report``
+    over both trees counts every test once, as the whole run did, with no problem."""
+    trees, counted = [], []
+    for index in (1, 2):
+        env = {**_colcon_env(pool_env, workspace), "ROS_ISOLATED_TEST_SHARD": f"{index}/2"}
+        output, _ids = _tested(workspace, env)
+        (line,) = SHARE_SUMMARY.findall(output)
+        tests, failed, flaky, domains, share, page = line
+        assert (failed, flaky, share) == ("0", "0", str(index)), output[-2000:]
+        assert int(tests) == int(domains) > 0, line  # each test of the share on its own ID
+        tree = _tree_of_share(workspace, tmp_path / f"share-{index}")
+        trees.append(tree)
+        said = run_cli(["report", "--json", str(tree)], env)
+        assert said.returncode == 0, said.stdout + said.stderr
+        assert json.loads(said.stdout)["total"]["tests"] == int(tests)
+        drawn = parsed((workspace / page).read_text(encoding="utf-8"))
+        assert page_totals(drawn) == {"tests": int(tests), "passed": int(tests)}
+        assert drawn.xpath("string(//*[@id='fact-shards'])").startswith(f"{index}/2")
+        counted.append(int(tests))
+    assert sum(counted) == 7, counted
+    merged = run_cli(["report", "--json", *map(str, trees)], pool_env)
+    assert merged.returncode == 0, merged.stdout + merged.stderr
+    found = json.loads(merged.stdout)
+    assert (found["total"]["tests"], found["total"]["failures"]) == (7, 0), found["total"]
+    assert [share["shard"] for share in found["shards"]["found"]] == ["1/2", "2/2"]
+    assert found["shards"]["problems"] == []
 
 
 def test_control_off_builds_and_tests_as_without_us_and_they_hear_each_other(

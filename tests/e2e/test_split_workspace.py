@@ -8,11 +8,16 @@ durations file written by ``report --durations`` from the whole run), one after 
 on the one build, each machine's results copied away as CI uploads them (the results of
 the last run stay in the build, as a build folder restored from a cache holds them: a
 test of another share must clear its own; share 3 even meets share 2's records, and
-must clear them too). Then the merge: each test ran in exactly one share, ctest showed
-the others skipped, the merged counts are the whole run's, the page shows every test
-once in Chromium; a share left out (share 2, whose records share 3's build held), or one
-run under another plan, is named and fails the merge, as is a share whose pytest session
-was killed mid-run.
+must clear them too). ``split_a`` takes the zero-edit include; ``split_b`` turns it off
+and registers one test with ``ros_isolated_add_test`` and the rest after its own
+``ros_isolated_test_all()``. Python is a wrapper that logs every start, so the RUNNERs
+started are counted: a share starts none for another share's test (ctest lists those
+"Not Run (Disabled)"), the whole run starts one for every test, and a malformed share
+starts every RUNNER, which fails it before any test command runs. Then the merge: each
+test ran in exactly one share, the merged counts are the whole run's, the page shows
+every test once in Chromium; a share left out (share 2, whose records share 3's build
+held), or one run under another plan, is named and fails the merge, as is a share whose
+pytest session was killed mid-run.
 """
 
 from __future__ import annotations
@@ -81,18 +86,24 @@ def _generate(src: Path) -> None:
     for package, count in CMAKE.items():
         folder = src / package
         (folder / "test").mkdir(parents=True)
-        lines = [
-            "cmake_minimum_required(VERSION 3.15)",
-            f"project({package} NONE)",
-            "find_package(ament_cmake REQUIRED)",
-            "if(BUILD_TESTING)",
-        ]
+        lines = ["cmake_minimum_required(VERSION 3.15)"]
+        if package == "split_b":  # its own calls, not the zero-edit include
+            lines.append("set(ROS_ISOLATED_TEST_ALL OFF)")
+        lines += [f"project({package} NONE)", "find_package(ament_cmake REQUIRED)"]
+        if package == "split_b":
+            lines.append("find_package(ros_isolated_test REQUIRED)")
+        lines.append("if(BUILD_TESTING)")
         for n in range(count):
+            add = "ament_add_test"
+            if package == "split_b" and n == 0:
+                add = "ros_isolated_add_test"  # before ros_isolated_test_all(): a macro's
             lines.append(
-                f'  ament_add_test({package}_{n} COMMAND "${{Python3_EXECUTABLE}}" -c '
+                f'  {add}({package}_{n} COMMAND "${{Python3_EXECUTABLE}}" -c '
                 f"\"__import__('time').sleep({0.05 * n:.2f})\" "
                 "GENERATE_RESULT_FOR_RETURN_CODE_ZERO)"
             )
+            if package == "split_b" and n == 0:
+                lines.append("  ros_isolated_test_all()")
         if package == "split_b":
             lines.append("  find_package(ament_cmake_pytest REQUIRED)")
             lines.append("  ament_add_pytest_test(split_b_pytest test/test_items.py)")
@@ -131,6 +142,18 @@ class Split:
         #: Each run's tree of results, and ctest's Test.xml per CMake package.
         self.trees: dict[str, Path] = {}
         self.ctest: dict[str, dict[str, etree._Element]] = {}
+        #: Each run's RUNNER starts (``<package>/<test>``) and test commands started.
+        self.runners: dict[str, list[str]] = {}
+        self.commands: dict[str, int] = {}
+        #: What ``colcon test-result --all`` said of each share's build.
+        self.test_result: dict[str, str] = {}
+        #: Python for CMake: every start is logged (to $SPLIT_STARTS, when set).
+        self.python = root / "python-logged"
+        self.python.write_text(
+            '#!/bin/sh\n[ -z "$SPLIT_STARTS" ] || printf \'%s\\n\' "$*" >> "$SPLIT_STARTS"\n'
+            f'exec "{sys.executable}" "$@"\n'
+        )
+        self.python.chmod(0o755)
 
     def shell(self, line: str, extra: Mapping[str, str] | None = None, fails: bool = False) -> str:
         """``line`` run by bash; it must succeed (or, ``fails``, must not)."""
@@ -155,9 +178,13 @@ class Split:
         holds them); the machine's records go, as a fresh machine has none, unless
         ``keep_records``: the next run meets them too, as in a build folder reused whole.
         """
-        said = self.shell(TEST, extra, fails)
+        starts = self.root / f"starts-{name}.log"
+        said = self.shell(TEST, {**(extra or {}), "SPLIT_STARTS": str(starts)}, fails)
         if fails:
             assert f"1 package failed: {PYTHON}" in said, said
+        self.runners[name], self.commands[name] = _starts(starts)
+        if name.startswith("shard-"):
+            self.test_result[name] = self.shell("colcon test-result --all")
         build = self.root / "build"
         tree = self.root / "trees" / name
         for package in CMAKE:
@@ -177,6 +204,22 @@ class Split:
         return tree
 
 
+def _starts(log: Path) -> tuple[list[str], int]:
+    """The RUNNERs a run started (``<package>/<test>``, from the arguments ament gives
+    them), and how many test commands (the tests' own ``python -c``) it started."""
+    runners: list[str] = []
+    commands = 0
+    for line in log.read_text().splitlines() if log.exists() else []:
+        words = line.split()
+        if any(word.endswith("run_test_isolated.py") for word in words):
+            at = next(i for i, word in enumerate(words) if word.endswith("run_test_isolated.py"))
+            package = words[words.index("--package-name") + 1]
+            runners.append(f"{package}/{canonical.test_name_of(Path(words[at + 1]))}")
+        elif "-c" in words and "__import__('time').sleep(" in line:
+            commands += 1
+    return runners, commands
+
+
 @pytest.fixture(scope="module")
 def split(tmp_path_factory: pytest.TempPathFactory, module_env: dict[str, str]) -> Split:
     """Built once; tested whole, as three shares by its durations, one share by count, and
@@ -187,7 +230,7 @@ def split(tmp_path_factory: pytest.TempPathFactory, module_env: dict[str, str]) 
     ws = Split(root, env)
     ws.shell(
         "colcon build --cmake-args -DCMAKE_PROJECT_INCLUDE=$(ros-isolated-test cmake-include) "
-        f"-DPython3_EXECUTABLE={sys.executable}"
+        f"-DPython3_EXECUTABLE={ws.python}"
     )
     ws.test("whole")
     durations = root / "durations.json"
@@ -208,6 +251,7 @@ def split(tmp_path_factory: pytest.TempPathFactory, module_env: dict[str, str]) 
         "ROS_ISOLATED_TEST_DURATIONS": str(durations),
     }
     ws.test("killed-1", {**killed, KILL: "1"}, fails=True)
+    ws.test("malformed", {"ROS_ISOLATED_TEST_SHARD": f"{SHARES + 1}/{SHARES}"}, fails=True)
     return ws
 
 
@@ -242,7 +286,66 @@ def test_the_shares_follow_the_plan_shard_plan_prints(split: Split) -> None:
         assert sorted(test["identity"] for test in share["tests"]) == sorted(_identities(tree))
 
 
-def test_ctest_shows_the_other_shares_tests_skipped(split: Split) -> None:
+def _cmake_tests(split: Split, run: str) -> list[str]:
+    return [
+        f"{package}/{test.findtext('Name')}"
+        for package, site in split.ctest[run].items()
+        for test in site.iterfind("Testing/Test")
+    ]
+
+
+def test_a_share_starts_no_runner_for_another_shares_test(split: Split) -> None:
+    """Counted from the logged starts: each share starts the RUNNERs of its own CMake
+    tests only, once each; over the shares, every test's once. The control: the whole
+    run starts one for every CMake test of both packages (the include's and the
+    ros_isolated_test_all() and macro one's)."""
+    every = _cmake_tests(split, "whole")
+    assert len(every) == sum(CMAKE.values()) + 1  # the CMake pytest is one ctest test
+    assert sorted(split.runners["whole"]) == sorted(every)
+    assert split.commands["whole"] == sum(CMAKE.values())
+    started: list[str] = []
+    for index, tree in enumerate(_shard_trees(split), start=1):
+        own = _ran_cmake(tree)
+        assert own and own < set(every), index
+        assert sorted(split.runners[f"shard-{index}"]) == sorted(own), index
+        started += split.runners[f"shard-{index}"]
+    assert sorted(started) == sorted(every)
+
+
+def _ran_cmake(tree: Path) -> set[str]:
+    """The CMake tests a tree has a RUNNER's result of (``<package>/<test>``)."""
+    return {
+        f"{path.parent.name}/{canonical.test_name_of(path)}"
+        for path in tree.glob("*/test_results/*/*.xml")
+    }
+
+
+def test_a_malformed_share_fails_every_runner_before_its_test_starts(split: Split) -> None:
+    """``4/3``: nothing is disabled, every RUNNER starts and fails with the one-line
+    error, and no test command runs (the control: the whole run's started them all)."""
+    assert sorted(split.runners["malformed"]) == sorted(_cmake_tests(split, "whole"))
+    assert split.commands["malformed"] == 0
+    for site in split.ctest["malformed"].values():
+        assert {test.get("Status") for test in site.iterfind("Testing/Test")} == {"failed"}
+    results = list(split.trees["malformed"].glob("*/test_results/*/*.xml"))
+    assert len(results) == len(_cmake_tests(split, "whole"))
+    for path in results:
+        said = path.read_text()
+        assert "ROS_ISOLATED_TEST_SHARD=" in said and "4/3" in said, path
+
+
+def test_colcon_test_result_counts_the_disabled_tests_skipped(split: Split) -> None:
+    """colcon reads ctest's Test.xml too: a disabled test is one test, skipped (never an
+    error or a failure), beside the result files of the tests that ran."""
+    every = _cmake_tests(split, "whole")
+    for index, tree in enumerate(_shard_trees(split), start=1):
+        disabled = len(every) - len(_ran_cmake(tree))
+        ran = json.loads(_report(split, tree).stdout)["total"]["tests"]
+        summary = f"Summary: {len(every) + ran} tests, 0 errors, 0 failures, {disabled} skipped"
+        assert summary in split.test_result[f"shard-{index}"], split.test_result[f"shard-{index}"]
+
+
+def test_ctest_lists_the_other_shares_tests_disabled(split: Split) -> None:
     for index, tree in enumerate(_shard_trees(split), start=1):
         ran = set(_identities(tree))
         for package, site in split.ctest[f"shard-{index}"].items():
@@ -255,7 +358,7 @@ def test_ctest_shows_the_other_shares_tests_skipped(split: Split) -> None:
                     assert status == "notrun", (index, name, status)
                     completion = test.find(".//NamedMeasurement[@name='Completion Status']")
                     said = completion.findtext("Value") if completion is not None else None
-                    assert said == "SKIP_RETURN_CODE=77", (index, name, said)
+                    assert said == "Disabled", (index, name, said)
         # No result file of another share's test stayed (the build held them all).
         names = {canonical.test_name_of(path) for path in tree.glob("*/test_results/*/*.xml")}
         assert names == {key.split("/", 1)[1] for key in ran if "::" not in key}

@@ -229,13 +229,22 @@ _CMAKE_ROOTS = ("/usr/lib/cmake", *map(str, Path("/usr/lib").glob("*-linux-gnu*/
 
 
 def bare_python() -> str | None:
-    """A system python3.11 that cannot import filelock (so not this suite's venv), if any."""
+    """A system python3.11 that cannot import ros_isolated_test (not this suite's venv), if any.
+
+    Debian's python3-filelock and python3-lxml may be there (the .deb's build needs them):
+    what matters is that the package itself is not, as for ctest's python3 on a machine
+    where ros-isolated-test lives in a venv.
+    """
     candidate = shutil.which("python3.11", path="/usr/bin:/bin:/usr/local/bin")
     if candidate is None:
         return None
-    # An empty environment: no PYTHONPATH may lend it the venv's packages.
+    # An empty environment and a neutral folder: no PYTHONPATH or checkout may lend it ours.
     probe = subprocess.run(
-        [candidate, "-c", "import filelock"], capture_output=True, env={}, check=False
+        [candidate, "-c", "import ros_isolated_test"],
+        capture_output=True,
+        env={},
+        check=False,
+        cwd="/",
     )
     return None if probe.returncode == 0 else candidate
 
@@ -244,8 +253,8 @@ def _bare_python() -> str | None:
     if bare_python() is not None:
         return None
     return (
-        "needs a system python3.11 without filelock, to run the RUNNER as ctest does with "
-        "a Python that cannot import ros-isolated-test (apt install python3.11)"
+        "needs a system python3.11 that cannot import ros-isolated-test, to run the RUNNER "
+        "as ctest does with such a Python (apt install python3.11)"
     )
 
 
@@ -460,7 +469,7 @@ COLCON = Capability("colcon", _colcon)
 GTEST = Capability("gtest", _gtest)
 #: googlemock's headers and sources too, for ament_add_gmock.
 GMOCK = Capability("gmock", _gmock)
-#: A system python3.11 without filelock (see :func:`bare_python`).
+#: A system python3.11 that cannot import the package (see :func:`bare_python`).
 BARE_PYTHON = Capability("bare-python3.11", _bare_python)
 TOMLLIB = Capability("tomllib", _tomllib)
 #: Other Pythons the product supports (3.10, the oldest; 3.12, Ubuntu 24.04's), run bare.

@@ -21,7 +21,7 @@ from helpers.commands import REPO
 
 #: The front page opens with these, exactly (the first code block, before any section).
 SET_UP_COMMANDS = (
-    "./scripts/demo.sh     # installs everything into .venv, then runs the demo\n"
+    "./scripts/demo.sh     # installs only what the demo runs into .venv, then runs it\n"
     "./scripts/test.sh     # installs what is missing, then runs the whole test suite"
 )
 FRONT_PAGE_LINES = 200

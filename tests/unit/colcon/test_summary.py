@@ -55,3 +55,19 @@ def test_a_bad_share_is_said_not_raised(tmp_path: Path) -> None:
 
 def test_missing_folders_are_left_out(tmp_path: Path) -> None:
     assert summary.result_paths([tmp_path / "gone", tmp_path]) == [tmp_path]
+
+
+def test_a_session_that_ran_none_of_its_tests_adds_no_id(tmp_path: Path) -> None:
+    """pytest with another machine's share: its session held ID 13 for no test."""
+    folder = _results(tmp_path / "a", ("one", 3, False))
+    (folder / "pytest.xml").write_text(
+        '<testsuites name="pytest tests"><testsuite name="pytest" errors="0" failures="0" '
+        'skipped="0" tests="0" time="0.1" timestamp="2026-01-01T00:00:00+00:00"><properties>'
+        '<property name="ros_domain_id" value="13"/></properties></testsuite></testsuites>'
+    )
+    line = summary.summarise([folder], tmp_path / "log", {})
+    assert " on 1 domain IDs;" in line, line
+    # The control: a test that ran on ID 13 counts it.
+    (folder / "two.xml").write_text(RESULT.format(name="two", domain=13, failures=0, failure=""))
+    line = summary.summarise([folder], tmp_path / "log", {})
+    assert " on 2 domain IDs;" in line, line

@@ -239,3 +239,56 @@ def test_the_package_xml_that_switches_the_plugin_on_names_the_items(
     assert names == [
         "mine/src/mine/test/test_it.py::test_only", "mine/test/test_it.py::test_only"
     ]  # fmt: skip
+
+
+#: A conftest that counts, without changing them, the split's costly steps in its session:
+#: reading the durations file, making a Selection (a plan), planning, and the per-item ask.
+_COUNTING_CONFTEST = """
+import json, os
+from ros_isolated_test.shard import plan, selection
+
+COUNTS = {"load": 0, "selection": 0, "placing": 0, "runs": 0}
+
+
+def _counted(owner, name, key):
+    original = getattr(owner, name)
+
+    def counted(*args, **kwargs):
+        COUNTS[key] += 1
+        return original(*args, **kwargs)
+
+    setattr(owner, name, counted)
+
+
+_counted(selection, "load", "load")
+_counted(selection.Selection, "__init__", "selection")
+_counted(plan.Plan, "_placing", "placing")
+_counted(selection.Selection, "runs", "runs")
+
+
+def pytest_sessionfinish(session):
+    with open(os.environ["SPLIT_COUNTS"], "w") as out:
+        json.dump(COUNTS, out)
+"""
+
+
+def test_a_session_plans_once_however_many_items(tmp_path: Path, env: dict[str, str]) -> None:
+    """200 items, each asked about (the control: ``runs`` counts every one), under one
+    read of the durations file, one Selection and one planning: the cost is per session."""
+    items = 200
+    root = project(
+        tmp_path / "pkg", "".join(f"def test_{n}():\n    pass\n\n" for n in range(items))
+    )
+    (root / "conftest.py").write_text(_COUNTING_CONFTEST)
+    durations = tmp_path / "durations.json"
+    write(durations, measured({f"pkg/test/test_it.py::test_{n}": 0.01 * n for n in range(items)}))
+    counts = tmp_path / "counts.json"
+    given = {**env, SHARD_ENV: "2/4", DURATIONS_ENV: str(durations), "SPLIT_COUNTS": str(counts)}
+    done = run_pytest(root, given, "-p", "no:cacheprovider", "test")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert json.loads(counts.read_text()) == {
+        "load": 1,
+        "selection": 1,
+        "placing": 1,
+        "runs": items,
+    }
