@@ -159,7 +159,7 @@ def _not_run_document(
 
 def _own_version() -> str:
     """``__version__`` of the package this file belongs to, read from its text, not imported."""
-    package = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # ament/ in it
     try:
         with open(os.path.join(package, "__init__.py"), encoding="utf-8") as handle:
             for line in handle:

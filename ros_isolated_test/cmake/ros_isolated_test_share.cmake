@@ -7,7 +7,7 @@
 # loads the directory, before the directory's add_test() calls.
 #
 # Testing: with ROS_ISOLATED_TEST_SHARD blank or unset the script does nothing (no
-# process). Set, it runs ros_isolated_test.runner.ctest_share once per package (one
+# process). Set, it runs ros_isolated_test.ament.shard once per package (one
 # process, not one per test), which places each listed test by the identity and plan its
 # RUNNER would use, removes the stale result files of the other shares' tests, leaves the
 # machine's record and prints those tests; each is marked DISABLED as ctest's add_test()
@@ -157,7 +157,7 @@ function(_ros_isolated_test_share_apply package list python)
   if(NOT _done)
     set_property(GLOBAL PROPERTY "_ROS_ISOLATED_TEST_SHARE_DONE_${list}" TRUE)
     execute_process(
-      COMMAND "${python}" -m ros_isolated_test.runner.ctest_share "${package}" "${list}"
+      COMMAND "${python}" -m ros_isolated_test.ament.shard "${package}" "${list}"
       OUTPUT_VARIABLE _out
       ERROR_VARIABLE _error
       RESULT_VARIABLE _rc)

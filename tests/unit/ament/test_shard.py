@@ -1,4 +1,4 @@
-"""``ctest_share``: a package's other shares' tests, decided once as ctest loads it.
+"""``ament.shard``: a package's other shares' tests, decided once as ctest loads it.
 
 Run as ctest's include runs it (``python -m``, a real process): the lines it prints are
 exactly the tests whose RUNNER would say "not in this shard" (``shard.selection``, the
@@ -14,7 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ros_isolated_test.runner.ctest_share import USAGE, read_list
+from ros_isolated_test.ament.shard import USAGE, read_list
 from ros_isolated_test.shard import record
 from ros_isolated_test.shard.durations import DURATIONS_ENV, measured, write
 from ros_isolated_test.shard.selection import select
@@ -39,7 +39,7 @@ def _listing(tmp_path: Path) -> Path:
 
 def _run(listing: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "ros_isolated_test.runner.ctest_share", PACKAGE, str(listing)],
+        [sys.executable, "-m", "ros_isolated_test.ament.shard", PACKAGE, str(listing)],
         env=env, capture_output=True, text=True, check=False,
     )  # fmt: skip
 

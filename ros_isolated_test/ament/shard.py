@@ -1,15 +1,15 @@
 """A package's share of a split, decided once when ctest loads it: the others never start.
 
-A RUNNER decides for its one test (``runner.share``), but only once ctest has started it:
+A RUNNER decides for its one test (``runner.shard``), but only once ctest has started it:
 in a split every machine would start a RUNNER, an interpreter, for every test of the
 workspace. So the CMake include and macros give each package's test folders a
 ``TEST_INCLUDE_FILES`` script (``ros_isolated_test_share.cmake``) which, only when
 ``ROS_ISOLATED_TEST_SHARD`` is set as ctest loads the tests, runs this module once per
-package: ``python -m ros_isolated_test.runner.ctest_share PACKAGE LIST``. ``LIST`` holds
+package: ``python -m ros_isolated_test.ament.shard PACKAGE LIST``. ``LIST`` holds
 the package's tests as configuring registered them, a line each: the ctest name, a tab,
 the result file. Each is placed by the identity its RUNNER would give it (``--package-name``, and
 the result file's name as ``RunRequest.test_name`` reads it) under the very selection the
-RUNNER reads (``runner.share.read``: the same variables, file and plan), and the lines of
+RUNNER reads (``runner.settings.split``: the same variables, file and plan), and the lines of
 the other shares' tests are printed: the script marks them ``DISABLED``, once ctest's own
 ``add_test`` shows their command names that package and result file.
 
@@ -100,14 +100,14 @@ def others(
 def main(argv: Sequence[str], environ: Mapping[str, str], out: TextIO, errors: TextIO) -> int:
     """Print the lines of the tests ctest is not to start; 0, or 2 with nothing printed."""
     if len(argv) != 2:
-        errors.write("usage: python -m ros_isolated_test.runner.ctest_share PACKAGE LIST\n")
+        errors.write("usage: python -m ros_isolated_test.ament.shard PACKAGE LIST\n")
         return USAGE
-    from ros_isolated_test.runner import share
+    from ros_isolated_test.runner import settings
     from ros_isolated_test.shard.spec import ShardSettingError
 
     package, listing = argv
     try:
-        selection = share.read(environ)
+        selection = settings.split(environ=environ)
     except ShardSettingError as error:
         errors.write(f"ros-isolated-test: {error}\n")
         return USAGE

@@ -1,4 +1,4 @@
-"""``runner.ament.colcon_on_path``: does the colcon on PATH load our colcon extension?
+"""``cli.colcon_on_path``: does the colcon on PATH load our colcon extension?
 
 Asked of real colcons: the suite's venv's, where the project is installed (it loads it),
 and the distro venv's, whose Python lacks the project (the control: it does not, as
@@ -21,7 +21,7 @@ from helpers import capabilities
 from helpers.commands import run_cli
 from helpers.ros_package import DISTRO_VENV
 
-from ros_isolated_test.runner.ament import colcon_on_path
+from ros_isolated_test.cli import colcon_on_path
 
 VENV_BIN = Path(sys.prefix) / "bin"
 DISTRO_BIN = DISTRO_VENV.bin
