@@ -27,6 +27,7 @@ from ros_isolated_test.runner.settings import (
     MAX_RERUNS,
     POOL_ENV,
     RERUNS_ENV,
+    RERUNS_FLAKY_ENV,
     WAIT_TIMEOUT_ENV,
 )
 from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV, ShardSettingError
@@ -59,6 +60,7 @@ Environment:
   {WAIT_TIMEOUT_ENV}      seconds to wait for a free ID (run --wait-timeout)
   {DISCOVERY_RANGE_ENV}  LOCALHOST|SUBNET|OFF|SYSTEM_DEFAULT (run --discovery-range)
   {RERUNS_ENV}           rerun a failed test up to N times, N <= {MAX_RERUNS} (run --rerun-failures)
+  {RERUNS_FLAKY_ENV}     as many, only for a test the history calls flaky (run --rerun-flaky)
   {RESOURCES_ENV}        resources the test holds, e.g. cpu=2,mem=4G,gpu=1 (run --resources)
   {CAPACITY_ENV}         what the machine has, e.g. cpu=8,mem=16G,gpu=1,sim=2; default:
                                      the CPUs usable, MemTotal, 1 of anything else;
@@ -218,6 +220,15 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     f"not run again). Default: {RERUNS_ENV}, else 0.",
 )
 @click.option(
+    "--rerun-flaky",
+    type=click.IntRange(min=0, max=MAX_RERUNS),
+    metavar="N",
+    help=f"Run a failed test again up to N times only when the test history "
+    f"(ROS_ISOLATED_TEST_HISTORY, else ./ros_isolated_test_history.sqlite3) calls it flaky; "
+    f"a test new, stable or broken there fails at once. Every attempt is kept as with "
+    f"--rerun-failures. Default: {RERUNS_FLAKY_ENV}, else 0.",
+)
+@click.option(
     "--resources",
     metavar="NAME=AMOUNT,...",
     help=f"Machine resources the test holds while it runs, taken with its ID (e.g. "
@@ -251,6 +262,7 @@ def run(
     wait_timeout: float | None,
     discovery_range: str | None,
     rerun_failures: int | None,
+    rerun_flaky: int | None,
     resources: str | None,
     isolation: str | None,
     shard: str | None,
@@ -273,6 +285,7 @@ def run(
             reruns=rerun_failures,
             resources=resources,
             isolation=isolation,
+            reruns_flaky=rerun_flaky,
         )
         split = share.read(os.environ, shard)
         request = RunRequest(
@@ -387,14 +400,19 @@ def status(as_json: bool) -> None:
     then the machine resources runners hold (rows with "via": "hold" and their
     "resources") and the capacity (one row with "via": "capacity"), when resources are
     held, asked for, or ROS_ISOLATED_TEST_CAPACITY is set.
+    The last line (on stderr with --json) says whether colcon on PATH loads
+    ros-isolated-test's colcon extension, which isolates colcon test with no flag.
     """
     from ros_isolated_test.domain_coordinator.status import machine_status
     from ros_isolated_test.runner import status_table
+    from ros_isolated_test.runner.ament import colcon_on_path
 
     try:
-        # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.
-        # Nor the isolation mode, which only the runs read.
-        config = settings.read(reruns=0, resources="", isolation=settings.DEFAULT_ISOLATION)
+        # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS (nor _FLAKY), which only `run`
+        # uses. Nor the isolation mode, which only the runs read.
+        config = settings.read(
+            reruns=0, resources="", isolation=settings.DEFAULT_ISOLATION, reruns_flaky=0
+        )
     except settings.SettingsError as error:
         click.echo(f"ros-isolated-test: error: {error}", err=True)
         sys.exit(2)
@@ -405,6 +423,8 @@ def status(as_json: bool) -> None:
     if found.queue_problem is not None:
         click.echo(f"ros-isolated-test: note: {found.queue_problem}", err=True)
     click.echo(status_table.as_json(found) if as_json else status_table.table(found))
+    # Whether `colcon test` here is isolated with no flag: after the table, or on stderr.
+    click.echo(colcon_on_path.said(), err=as_json)
 
 
 @cli.command()
