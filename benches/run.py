@@ -36,6 +36,7 @@ import contention
 import cpu_load
 import exhaustion
 import gain
+import history
 import html_report
 import import_costs
 import namespace_mode
@@ -85,6 +86,7 @@ BENCHMARKS: dict[str, Callable[[Context], Section]] = {
     "shard_cost": shard_cost.run,
     "gain": gain.run,
     "split": split.run,
+    "history": history.run,
 }
 #: Set in the re-executed process inside the private network namespace.
 NETNS_MARK = "ROS_ISOLATED_TEST_BENCH_NETNS"

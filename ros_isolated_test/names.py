@@ -31,6 +31,7 @@ LOCK_DIR = "ROS_ISOLATED_TEST_LOCK_DIR"
 WAIT_TIMEOUT = "ROS_ISOLATED_TEST_WAIT_TIMEOUT"
 DISCOVERY_RANGE = "ROS_ISOLATED_TEST_DISCOVERY_RANGE"
 RERUNS = "ROS_ISOLATED_TEST_RERUNS"
+RERUNS_FLAKY = "ROS_ISOLATED_TEST_RERUNS_FLAKY"
 RESOURCES = "ROS_ISOLATED_TEST_RESOURCES"
 CAPACITY = "ROS_ISOLATED_TEST_CAPACITY"
 GZ_PARTITION_SWITCH = "ROS_ISOLATED_TEST_GZ_PARTITION"
@@ -61,6 +62,11 @@ ENVIRONMENT = (
         "runner, plugin",
     ),
     Name(RERUNS, "run a failed test again up to N times (run --rerun-failures)", "runner"),
+    Name(
+        RERUNS_FLAKY,
+        "as many, only for a test the history calls flaky (run --rerun-flaky)",
+        "runner",
+    ),
     Name(
         RESOURCES,
         "resources the test holds, e.g. cpu=2,mem=4G,gpu=1 (run --resources)",

@@ -16,10 +16,11 @@ from pathlib import Path
 import click
 
 from ros_isolated_test.cli import usage
+from ros_isolated_test.history.store import DEFAULT_FILE
 from ros_isolated_test.runner.settings import HISTORY_ENV, history_database
 
 #: The database when neither --db nor ROS_ISOLATED_TEST_HISTORY names one.
-DEFAULT_DB = Path("ros_isolated_test_history.sqlite3")
+DEFAULT_DB = Path(DEFAULT_FILE)
 #: The subcommand ``history`` runs when the first argument names no other.
 SHOW = "show"
 

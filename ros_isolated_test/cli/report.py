@@ -16,6 +16,7 @@ from ros_isolated_test.cli import usage
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from ros_isolated_test.report.html_parts import Past
     from ros_isolated_test.report.shard import Split
     from ros_isolated_test.report.text_report import TextReport
 
@@ -44,12 +45,22 @@ if TYPE_CHECKING:
     "runs' trees, a split's shards included (a test measured in several runs keeps the "
     "median).",
 )
+@click.option(
+    "--history",
+    "history_db",
+    type=click.Path(dir_okay=False, path_type=Path),
+    metavar="DB",
+    help="With --html: the test history database; each failure on the page then says "
+    "whether it is new, known flaky or broken since a run, and each test shows its "
+    "outcome strip (from the runs before this one; a DB not yet there is an empty history).",
+)
 def report(
     paths: tuple[Path, ...],
     verbose: bool,
     as_json: bool,
     html_file: Path | None,
     durations_file: Path | None,
+    history_db: Path | None,
 ) -> None:
     """Summarise the xUnit result files under PATHS (default: build).
 
@@ -76,6 +87,8 @@ def report(
         if not default.exists():
             raise click.UsageError("no PATHS given and no 'build' folder here; name a folder")
         paths = (default,)
+    if history_db is not None and html_file is None:
+        raise click.UsageError("--history is shown on the page: give --html FILE too")
     if durations_file is not None:
         if html_file is not None or as_json:
             raise click.UsageError(
@@ -99,21 +112,38 @@ def report(
                 split.add(item)
             split.add_records(records)
         else:
-            _html_report(paths, html_file, printed, split)
+            history = None if history_db is None else _history(history_db, paths)
+            _html_report(paths, html_file, printed, split, history)
         printed.write(lambda piece: click.echo(piece, nl=False))
     if printed.total.failed or split.problems:
         sys.exit(usage.FAILED)
 
 
+def _history(db: Path, paths: tuple[Path, ...]) -> tuple[str, dict[str, Past]]:
+    """What the history says of the runs before these trees' run; unreadable: exit 2."""
+    from ros_isolated_test.history.stats import before_run
+    from ros_isolated_test.history.store import StoreError
+    from ros_isolated_test.text import display_text
+
+    try:
+        return display_text(str(db)), before_run(db, paths)
+    except StoreError as error:
+        usage.fail(f"--history: {error}", usage.USAGE)
+
+
 def _html_report(
-    paths: tuple[Path, ...], destination: Path, printed: TextReport, split: Split
+    paths: tuple[Path, ...],
+    destination: Path,
+    printed: TextReport,
+    split: Split,
+    history: tuple[str, dict[str, Past]] | None = None,
 ) -> None:
     """Write the page (read once, for it and the text); a page that cannot be written: exit 2."""
     from ros_isolated_test import atomic_file
     from ros_isolated_test.report import html_report
 
     try:
-        html_report.write(paths, destination, printed.add, split)
+        html_report.write(paths, destination, printed.add, split, history)
     except OSError as error:
         fix = "choose a writable file path"
         if isinstance(error, atomic_file.NotReplaceableError):

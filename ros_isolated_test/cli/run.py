@@ -24,6 +24,7 @@ from ros_isolated_test.runner.settings import (
     ISOLATION_ENV,
     MAX_RERUNS,
     RERUNS_ENV,
+    RERUNS_FLAKY_ENV,
     WAIT_TIMEOUT_ENV,
 )
 from ros_isolated_test.shard.spec import DURATIONS_ENV, SHARD_ENV
@@ -161,6 +162,15 @@ def _junit_xml_of(args: list[str]) -> Path | None:
     f"not run again). Default: {RERUNS_ENV}, else 0.",
 )
 @click.option(
+    "--rerun-flaky",
+    type=click.IntRange(min=0, max=MAX_RERUNS),
+    metavar="N",
+    help=f"Run a failed test again up to N times only when the test history "
+    f"(ROS_ISOLATED_TEST_HISTORY, else ./ros_isolated_test_history.sqlite3) calls it flaky; "
+    f"a test new, stable or broken there fails at once. Every attempt is kept as with "
+    f"--rerun-failures. Default: {RERUNS_FLAKY_ENV}, else 0.",
+)
+@click.option(
     "--resources",
     metavar="NAME=AMOUNT,...",
     help=f"Machine resources the test holds while it runs, taken with its ID (e.g. "
@@ -194,6 +204,7 @@ def run(
     wait_timeout: float | None,
     discovery_range: str | None,
     rerun_failures: int | None,
+    rerun_flaky: int | None,
     resources: str | None,
     isolation: str | None,
     shard: str | None,
@@ -216,6 +227,7 @@ def run(
             reruns=rerun_failures,
             resources=resources,
             isolation=isolation,
+            reruns_flaky=rerun_flaky,
         )
         split = settings.split(shard)
         request = RunRequest(

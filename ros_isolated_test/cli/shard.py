@@ -25,7 +25,8 @@ from ros_isolated_test.shard.spec import MAX_TOTAL
     "--durations",
     "durations_file",
     metavar="FILE",
-    help="The durations file the runners would plan from. Default: "
+    help="The durations file the runners would plan from (or a test history database, "
+    "read as `history durations` writes it). Default: "
     "ROS_ISOLATED_TEST_DURATIONS, else the split is by count.",
 )
 @click.option(

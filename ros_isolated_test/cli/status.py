@@ -32,14 +32,18 @@ def status(as_json: bool) -> None:
     then the machine resources runners hold (rows with "via": "hold" and their
     "resources") and the capacity (one row with "via": "capacity"), when resources are
     held, asked for, or ROS_ISOLATED_TEST_CAPACITY is set.
+    The last line (on stderr with --json) says whether colcon on PATH loads
+    ros-isolated-test's colcon extension, which isolates colcon test with no flag.
     """
-    from ros_isolated_test.cli import status_table
+    from ros_isolated_test.cli import colcon_on_path, status_table
     from ros_isolated_test.domain_coordinator.status import machine_status
 
     try:
-        # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS, which only `run` uses.
-        # Nor the isolation mode, which only the runs read.
-        config = settings.read(reruns=0, resources="", isolation=settings.DEFAULT_ISOLATION)
+        # reruns=0: never reads ROS_ISOLATED_TEST_RERUNS (nor _FLAKY), which only `run`
+        # uses. Nor the isolation mode, which only the runs read.
+        config = settings.read(
+            reruns=0, resources="", isolation=settings.DEFAULT_ISOLATION, reruns_flaky=0
+        )
     except settings.SettingsError as error:
         usage.fail(str(error), usage.USAGE)
     for note in config.notes:  # the pool a runner here would use; on stderr: --json parses
@@ -49,3 +53,5 @@ def status(as_json: bool) -> None:
     if found.queue_problem is not None:
         click.echo(f"ros-isolated-test: note: {found.queue_problem}", err=True)
     click.echo(status_table.as_json(found) if as_json else status_table.table(found))
+    # Whether `colcon test` here is isolated with no flag: after the table, or on stderr.
+    click.echo(colcon_on_path.said(), err=as_json)

@@ -61,6 +61,7 @@ class SummaryEventHandler(EventHandlerExtensionPoint):  # type: ignore[misc]
             summary.result_paths(self._bases),
             Path(log_path) if log_path is not None else None,
             os.environ,
+            workspace=Path.cwd(),  # the test history is the workspace's
         )
         print(line, flush=True)
         sys.stdout.flush()

@@ -5,7 +5,9 @@ result folders of the packages the run tested, written into colcon's log folder 
 run (``log/latest_test/`` leads to it). The line counts tests run, failed (failures and
 errors), flaky, and the distinct domain IDs the results say they ran on. With
 ``ROS_ISOLATED_TEST_SHARD`` set, the page and the line are this machine's share, as
-``report`` takes them there.
+``report`` takes them there. Each run is recorded into the workspace's test history
+(``history``), and the page says of each failure whether it is new, known flaky or
+broken since a run, with each test's outcome strip.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 
 from ros_isolated_test import names
 from ros_isolated_test.report import html_report
+from ros_isolated_test.report.html_parts import Past
 from ros_isolated_test.report.shard import Split
 from ros_isolated_test.report.tree import FileRead
 from ros_isolated_test.shard.spec import ShardSettingError
@@ -51,8 +54,18 @@ def result_paths(bases: Iterable[Path]) -> list[Path]:
     return sorted({base for base in bases if base.exists()})
 
 
-def summarise(paths: list[Path], log_path: Path | None, environ: Mapping[str, str]) -> str:
-    """Write the page (when colcon logs) and return the one line that names it."""
+def summarise(
+    paths: list[Path],
+    log_path: Path | None,
+    environ: Mapping[str, str],
+    workspace: Path | None = None,
+) -> str:
+    """Write the page (when colcon logs) and return the one line that names it.
+
+    With ``workspace`` (colcon's folder), the run is recorded into its test history
+    first and the page says what the runs before say of each failure (:func:`history`);
+    a warning about the database is a line of its own before the summary line.
+    """
     from ros_isolated_test.runner import settings
 
     try:
@@ -62,10 +75,12 @@ def summarise(paths: list[Path], log_path: Path | None, environ: Mapping[str, st
     split = Split(share)
     domains = DomainIds()
     page = (log_path / PAGE) if log_path is not None else Path("/dev/null")
+    past, warning = history(paths, environ, workspace)
+    said = f"{warning}\n" if warning else ""
     try:
-        total = html_report.write(paths, page, domains.add, split)
+        total = html_report.write(paths, page, domains.add, split, past)
     except OSError as error:
-        return f"{PREFIX} cannot write the page {page}: {error.strerror or error}"
+        return f"{said}{PREFIX} cannot write the page {page}: {error.strerror or error}"
     failed = total.failures + total.errors
     line = (
         f"{PREFIX} {total.tests} tests run, {failed} failed, {total.flaky} flaky, "
@@ -76,5 +91,39 @@ def summarise(paths: list[Path], log_path: Path | None, environ: Mapping[str, st
     if split.problems:
         line += f"; {split.problems[0]}"
     if log_path is None:
-        return f"{line}; no page: colcon's log is off (--log-base /dev/null)"
-    return f"{line}; page: {page}"
+        return f"{said}{line}; no page: colcon's log is off (--log-base /dev/null)"
+    return f"{said}{line}; page: {page}"
+
+
+def history(
+    paths: list[Path], environ: Mapping[str, str], workspace: Path | None
+) -> tuple[tuple[str, dict[str, Past]] | None, str | None]:
+    """Record the run into the workspace's history, and what it says for the page.
+
+    The database is ``<workspace>/ros_isolated_test_history.sqlite3`` (where ``history``
+    run in the workspace looks first). With ``ROS_ISOLATED_TEST_HISTORY`` set, the
+    runners and the plugin have recorded each test into that one already: it is read,
+    not recorded into again. Never raises: a database that cannot be used is the one
+    warning line returned, the page then without history.
+    """
+    if workspace is None:
+        return None, None
+    from ros_isolated_test.history.record import gathered, record_trees
+    from ros_isolated_test.history.stats import before_run
+    from ros_isolated_test.history.store import DEFAULT_FILE
+    from ros_isolated_test.runner.settings import history_database
+    from ros_isolated_test.text import display_text
+
+    named = history_database(environ)
+    db = named or workspace / DEFAULT_FILE
+    try:
+        run = gathered(paths)
+    except Exception as error:  # the page reads the trees again and says what is wrong
+        return None, f"{PREFIX} warning: not recorded in the test history: {error}"
+    warning = None if named is not None else record_trees(db, run)
+    if warning is not None:
+        return None, warning
+    try:
+        return (display_text(str(db)), before_run(db, run)), None
+    except Exception as error:
+        return None, f"{PREFIX} warning: the page has no history ({display_text(str(db))}): {error}"

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import json
 import sqlite3
-import statistics
 from collections.abc import Iterator
 
 from ros_isolated_test.history.stats import DEFAULT_RUNS
 from ros_isolated_test.history.store import loaded
-from ros_isolated_test.shard.durations import Durations, measured
+from ros_isolated_test.shard.durations import Durations, history_medians, measured
 
 _RUN_FIELDS = (
     "key",
@@ -58,16 +57,9 @@ def json_lines(connection: sqlite3.Connection) -> Iterator[str]:
 
 
 def durations(connection: sqlite3.Connection, runs: int = DEFAULT_RUNS) -> Durations:
-    """Each test's median last-attempt seconds over the last ``runs`` runs."""
-    samples: dict[str, list[float]] = {}
-    rows = connection.execute(
-        "SELECT t.name, a.seconds FROM attempts a JOIN tests t ON t.id = a.test"
-        " WHERE a.run IN (SELECT id FROM runs ORDER BY started DESC, id DESC LIMIT ?)"
-        " AND a.seconds IS NOT NULL AND a.outcome NOT IN ('not run', 'skipped')"
-        " AND a.attempt = (SELECT max(b.attempt) FROM attempts b"
-        " WHERE b.run = a.run AND b.test = a.test)",
-        (runs,),
-    )
-    for name, seconds in rows:
-        samples.setdefault(loaded(name), []).append(seconds)
-    return measured({name: statistics.median(values) for name, values in samples.items()})
+    """Each test's median last-attempt seconds over the last ``runs`` runs.
+
+    Read by ``shard.durations`` (which a split planning from the database itself calls
+    too), so the file written and the database give the same plan.
+    """
+    return measured(history_medians(connection, runs))

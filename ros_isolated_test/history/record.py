@@ -288,9 +288,12 @@ def _test_ids(connection: sqlite3.Connection, names: list[str | bytes]) -> dict[
     return ids
 
 
-def record(db: Path, trees: Iterable[Path]) -> bool:
-    """The run in ``trees`` into the database ``db``; whether it was new. :class:`StoreError`."""
-    run = gathered(trees)
+def record(db: Path, trees: Iterable[Path] | Run) -> bool:
+    """The run in ``trees`` (or one read already) into ``db``; whether it was new.
+
+    Raises :class:`StoreError` for a database that cannot be used.
+    """
+    run = trees if isinstance(trees, Run) else gathered(trees)
     connection = connect(db)
     try:
         return write(connection, run)
@@ -300,7 +303,7 @@ def record(db: Path, trees: Iterable[Path]) -> bool:
         connection.close()
 
 
-def record_trees(db: Path, trees: Iterable[Path]) -> str | None:
+def record_trees(db: Path, trees: Iterable[Path] | Run) -> str | None:
     """Record, never raising: None when done, else the one warning line to print.
 
     For code that records as a side effect (``run``, the pytest plugin, colcon's event

@@ -13,6 +13,9 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
+#: The database's name where no option or variable names one: in the current folder for
+#: ``history`` and reruns, in the workspace for the colcon extension (its folder).
+DEFAULT_FILE = "ros_isolated_test_history.sqlite3"
 #: ``PRAGMA application_id`` of a history database ("RITH").
 APPLICATION_ID = 0x52495448
 #: Runs kept unless ``history prune --keep`` said otherwise.

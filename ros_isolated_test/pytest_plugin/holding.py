@@ -66,9 +66,10 @@ def isolate(config: pytest.Config, state: State, explicit: bool, controller: boo
         return
     try:
         # reruns=0: the plugin never reruns, so a bad ROS_ISOLATED_TEST_RERUNS (for `run`)
-        # must not fail the session. Resources: only what pytest's option or ini asks.
+        # or ROS_ISOLATED_TEST_RERUNS_FLAKY must not fail the session. Resources: only what
+        # pytest's option or ini asks.
         config_settings = settings.read(
-            environ, reruns=0, resources=asked, resources_origin=asked_by
+            environ, reruns=0, resources=asked, resources_origin=asked_by, reruns_flaky=0
         )
         # The tests run in this process (it enters any namespaces itself); xdist's workers
         # run threads, so they cannot.

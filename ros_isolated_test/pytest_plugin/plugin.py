@@ -20,6 +20,7 @@ launch's tests on one worker (scheduling.py).
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from collections.abc import Generator
 from typing import Any
@@ -233,6 +234,7 @@ def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]
     yield
     if split is not None:  # --junit-xml is written now (junitxml's sessionfinish)
         sharding.complete_record(split, config)
+        _record(config, split)
     if state is None:
         return
     from ros_isolated_test.pytest_plugin import holding
@@ -244,6 +246,34 @@ def pytest_sessionfinish(session: pytest.Session) -> Generator[None, None, None]
         note(state.error.removeprefix("ros-isolated-test: "))
         session.exitstatus = holding.NO_ID_EXIT
     holding.release(state)
+
+
+def _record(config: pytest.Config, split: Sharding) -> None:
+    """With ``ROS_ISOLATED_TEST_HISTORY`` set, the written --junit-xml into the test history.
+
+    Only the file's writer (not an xdist worker) and only for items the plugin names
+    (under a runner's ID the runner records the whole test). Recording never raises:
+    a database that cannot be used is one warning line, the exit status stays pytest's.
+    """
+    xmlpath = getattr(config.option, "xmlpath", None)
+    if not split.named or not xmlpath or hasattr(config, "workerinput"):
+        return
+    from ros_isolated_test.runner.settings import history_database
+
+    db = history_database()
+    if db is None:
+        return
+    from pathlib import Path
+
+    from ros_isolated_test.history.record import record_trees
+
+    written = config.invocation_params.dir / Path(xmlpath).expanduser()
+    if not written.is_file():
+        return
+    warning = record_trees(db, [written])
+    if warning is not None:
+        with contextlib.suppress(OSError, ValueError):
+            print(warning, file=sys.stderr, flush=True)
 
 
 @pytest.hookimpl(trylast=True)

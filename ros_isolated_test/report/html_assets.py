@@ -86,6 +86,17 @@ article.case h3{margin:2px 0;font-size:15px;word-break:break-all}
 padding:0 6px;margin-right:6px;vertical-align:2px;text-transform:uppercase}
 .tag.failure,.tag.error{background:var(--fail)}.tag.flaky{background:var(--flaky)}
 .tag.timeout{background:var(--timeout)}
+.known{display:inline-block;font-size:12px;font-weight:600;border-radius:3px;padding:0 6px;
+margin-left:8px;vertical-align:1px;border:1px solid}
+.known.new{color:var(--fail);border-color:var(--fail)}
+.known.flaky{color:#8a5200;border-color:var(--flaky);background:#fff8e6}
+.known.broken{color:#fff;background:#7f1d1d;border-color:#7f1d1d}
+.strip{display:inline-flex;gap:1px;margin-left:8px;vertical-align:1px}
+.strip i{font:700 10px/14px ui-monospace,monospace;font-style:normal;width:11px;
+text-align:center;color:#fff;border-radius:2px;background:var(--skip)}
+.strip i.sP{background:var(--pass)}.strip i.sF,.strip i.sE{background:var(--fail)}
+.strip i.sf{background:var(--flaky)}.strip i.sT{background:var(--timeout)}
+.strip i.now{outline:2px solid var(--ink);outline-offset:1px;margin-left:3px}
 .where{color:var(--muted);font-size:12px;word-break:break-all}
 pre{background:#f6f6f6;border:1px solid #eee;padding:6px 8px;margin:6px 0;overflow:auto;
 max-height:24em;font:12px/1.35 ui-monospace,monospace;white-space:pre-wrap;

@@ -20,7 +20,7 @@ from ros_isolated_test import __version__, names
 from ros_isolated_test.report import html_assets
 from ros_isolated_test.report.bounded_values import local
 from ros_isolated_test.report.counts import FileReport
-from ros_isolated_test.report.html_parts import attr, text
+from ros_isolated_test.report.html_parts import Past, attr, text
 from ros_isolated_test.report.html_timeline import Bar, write_timeline
 from ros_isolated_test.report.spool import Spool
 from ros_isolated_test.xunit.timeline import DOMAIN_POOL
@@ -67,6 +67,9 @@ class Page:
         #: A split's shares found (``I/N``, plan, hosts) and its problems (``shards``).
         self.shares: list[tuple[str, str, list[str]]] = []
         self.split_problems: list[str] = []
+        #: The test history's word on each test (None: no history asked for), and where.
+        self.history: dict[str, Past] | None = None
+        self.history_source = ""
 
     def note(self, fact: str, value: str) -> None:
         """Count ``value`` of ``fact`` ("": not recorded); past FACT_VALUES only counted."""
@@ -202,6 +205,13 @@ def _facts_html(page: Page) -> str:
             for share, plan, hosts in page.shares
         )
         rows.append(f"<tr><th>shards</th><td id=fact-shards>{text(shares, 8192)}</td></tr>")
+    if page.history is not None:
+        rows.append(
+            f"<tr><th>history</th><td id=fact-history>{text(page.history_source, 1024)}: "
+            f"{len(page.history)} test(s) in the runs before this one; each failure says "
+            "whether it is new, known flaky or broken since a run, each test its strip of "
+            "outcomes (oldest first, this run last)</td></tr>"
+        )
     if page.foreign:
         rows.append(
             f"<tr><th>other producers</th><td>{page.foreign} result file(s) not written by "

@@ -38,13 +38,23 @@ from ros_isolated_test.report import html_timeline
 from ros_isolated_test.report.bounded_values import Reading, drawable
 from ros_isolated_test.report.counts import FileReport, listed_as_flaky
 from ros_isolated_test.report.html_page import FACTS, Page, assemble
-from ros_isolated_test.report.html_parts import text, write_case, write_suite
+from ros_isolated_test.report.html_parts import (
+    Past,
+    now_letter,
+    strip_html,
+    text,
+    write_case,
+    write_suite,
+)
 from ros_isolated_test.report.html_timeline import BAR_TEXT
 from ros_isolated_test.report.shard import Split
+from ros_isolated_test.report.shard_durations import named_tests
 from ros_isolated_test.report.tree import FileRead, read_tree
 from ros_isolated_test.text import shown
 from ros_isolated_test.xunit import raw
 from ros_isolated_test.xunit.canonical import test_name_of
+from ros_isolated_test.xunit.model import Case
+from ros_isolated_test.xunit.xml_text import name_token
 
 
 def write(
@@ -52,6 +62,7 @@ def write(
     destination: Path,
     each: Callable[[FileRead], object] | None = None,
     split: Split | None = None,
+    history: tuple[str, dict[str, Past]] | None = None,
 ) -> FileReport:
     """Write the page for every result file under ``paths`` to ``destination``.
 
@@ -60,7 +71,10 @@ def write(
     rename (a reader never sees half a page); the null device discards it; a device
     node, FIFO or socket is never replaced (:class:`NotReplaceableError`, before
     anything is read). ``split`` gathers what the trees say of a split (each file and
-    the machines' records), which the page shows with its problems.
+    the machines' records), which the page shows with its problems. ``history`` is what
+    the test history says of the runs before this one (where it is kept, and each
+    test's :class:`Past` by identity): each failure then says whether it is new, known
+    flaky or broken since when, and each test shows its outcome strip.
     """
     discard = discards(destination)
     kind = None if discard else special_kind(destination)
@@ -69,6 +83,8 @@ def write(
     if not discard and destination.is_dir():
         raise IsADirectoryError(21, "it is a directory", str(destination))
     page = Page()
+    if history is not None:
+        page.history_source, page.history = history
     records: list[Path] = []
     try:
         for number, item in enumerate(read_tree(paths, records), start=1):
@@ -153,15 +169,79 @@ def _add(page: Page, item: FileRead, number: int) -> None:
     page.bars.extend(bars)
     where += html_timeline.runs(bars)
     output = suite.system_out if suite is not None else ""
+    past_of = _pasts(page, item, ours)
+    on = page.history is not None
     for index, case in enumerate(failed, start=1):
-        write_case(page.failures, case, f"f{number}-{index}", test, where, output)
+        past = past_of(case)
+        write_case(page.failures, case, f"f{number}-{index}", test, where, output, past, on)
     for index, case in enumerate(flaky, start=1):
-        write_case(page.flaky, case, f"k{number}-{index}", test, where, output)
+        past = past_of(case)
+        write_case(page.flaky, case, f"k{number}-{index}", test, where, output, past, on)
     offset = page.rest.size
-    write_suite(page.rest, f"s{number}", test, _shown_path(item.path), report, cases)
+    strips = _strips(page, item, ours, past_of)
+    write_suite(page.rest, f"s{number}", test, _shown_path(item.path), report, cases, strips)
     listed = len(failed) + len(flaky)
     block = (package[:BAR_TEXT], test[:BAR_TEXT], number, offset, page.rest.size - offset)
     page.blocks.append((*block, len(cases), listed))
+
+
+def _pasts(page: Page, item: FileRead, ours: bool) -> Callable[[Case], Past | None]:
+    """Each case's test in the history before this run: a runner's file is one test."""
+    history = page.history
+    if history is None:
+        return lambda case: None
+    if ours:
+        named = named_tests(item)
+        past = history.get(named[0][0]) if len(named) == 1 else None
+        return lambda case: past
+    identities = _identities(item)
+    if not identities:
+        return lambda case: None
+    return lambda case: history.get(identities.get((case.classname, case.name), ""))
+
+
+def _identities(item: FileRead) -> dict[tuple[str, str], str]:
+    """Each item's identity by (class name, name) as the page names it (pytest's items)."""
+    if item.read is None:
+        return {}
+    return {
+        (
+            name_token(raw.attrs.get("classname", ""), "").rstrip(".") or raw.suite.strip(),
+            name_token(raw.attrs.get("name", ""), ""),
+        ): raw.identity
+        for raw in item.read.cases
+        if raw.identity
+    }
+
+
+def _strips(
+    page: Page, item: FileRead, ours: bool, past_of: Callable[[Case], Past | None]
+) -> tuple[str, dict[int, str]]:
+    """The outcome strips of a suite's block: the file's one test, or each item's."""
+    if page.history is None:
+        return "", {}
+    if ours:
+        report = item.report
+        exit_text = item.read.suites[0].properties.get("exit", "") if item.read else ""
+        letter = "P"
+        if "timed out" in exit_text:
+            letter = "T"
+        elif exit_text == "not run":
+            letter = "N"
+        elif report.failed:
+            letter = "E" if report.errors and not report.failures else "F"
+        elif report.flaky:
+            letter = "f"
+        elif report.tests and report.skipped == report.tests:
+            letter = "S"
+        whole = past_of(item.cases[0]) if item.cases else None
+        return f" {strip_html(whole, letter)}", {}
+    named = _identities(item)  # an item the history may know: its strip, if only this run
+    strips: dict[int, str] = {}
+    for index, case in enumerate(item.cases):
+        if (case.classname, case.name) in named:
+            strips[index] = f" {strip_html(past_of(case), now_letter(case))}"
+    return "", strips
 
 
 def _package_of(path: Path, test: str, ours: bool) -> str:

@@ -29,6 +29,36 @@ if TYPE_CHECKING:
 
 #: The suite property saying how many reruns a failed test was allowed.
 RERUNS_PROPERTY = "rerun_failures"
+#: The suite property saying how many it was allowed as flaky by the test history.
+RERUNS_FLAKY_PROPERTY = "rerun_flaky"
+
+
+def flaky_by_history(request: RunRequest) -> str | None:
+    """The line to say when the test history calls this test flaky; None when it does not.
+
+    The test is named as the history names it (``<package>/<test>``); the database is
+    ROS_ISOLATED_TEST_HISTORY, else ``history``'s default in the current folder. Read
+    only now, after a failure: sqlite3 is never imported for a test that passes.
+    """
+    from pathlib import Path
+
+    from ros_isolated_test.history.stats import called_flaky
+    from ros_isolated_test.history.store import DEFAULT_FILE
+    from ros_isolated_test.runner.settings import RERUNS_FLAKY_ENV, history_database
+    from ros_isolated_test.shard.identity import IdentityError, identity
+
+    try:
+        name = identity(request.package, request.test_name)
+    except IdentityError:
+        return None
+    db = history_database() or Path(DEFAULT_FILE)
+    if not called_flaky(db, name):
+        return None
+    reruns = request.settings.reruns_flaky
+    return (
+        f"the test history calls {name} flaky: running it again up to {reruns} time(s) "
+        f"({RERUNS_FLAKY_ENV})"
+    )
 
 
 def reruns(
@@ -50,6 +80,9 @@ def reruns(
     from ros_isolated_test.xunit.attempts import ATTEMPTS_PROPERTY
 
     total = config.reruns + 1
+    # Reruns where needed: more of them only for a test the history calls flaky, asked
+    # once, at the first failure that the plain reruns would not run again.
+    ask_history = config.reruns_flaky > config.reruns
     ids: list[str] = []
     number = ran = 1
     # What a test that passes at once says: one attempt, no rewrite needed.
@@ -61,6 +94,14 @@ def reruns(
         ids.append("unset" if domain_id is None else str(domain_id))
         ran = number
         why = _failed_because(outcome, code, capture, result)
+        if why is not None and number == total and ask_history and guard.late is None:
+            ask_history = False
+            said = flaky_by_history(request)
+            if said is not None:
+                total = config.reruns_flaky + 1
+                capture.note(said)
+                base[RERUNS_FLAKY_PROPERTY] = str(config.reruns_flaky)  # every attempt's
+                result.properties[RERUNS_FLAKY_PROPERTY] = base[RERUNS_FLAKY_PROPERTY]
         if why is None or number == total or guard.late is not None:
             break
         number += 1

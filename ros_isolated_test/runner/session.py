@@ -162,7 +162,7 @@ def _attempted(
         )
     guard.result = result
     guard.note_late()  # one that came while the ID was released
-    if config.reruns:
+    if config.reruns or config.reruns_flaky:  # reruns_flaky: where the history says flaky
         code = reruns(request, policy, config, result, both, guard, base, outcome, domain_id)
     else:
         code = conclude(request, result, both.capture, outcome)

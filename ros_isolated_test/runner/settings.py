@@ -55,6 +55,9 @@ DEFAULT_WAIT_TIMEOUT = 600.0
 DISCOVERY_RANGE_ENV = discovery.OVERRIDE_ENV
 #: How many times a failed test runs again (``run --rerun-failures``; CMake's ``RERUNS``).
 RERUNS_ENV = names.RERUNS
+#: How many times a failed test runs again when the test history calls it flaky
+#: (``run --rerun-flaky``): reruns where they are needed, not for every failure.
+RERUNS_FLAKY_ENV = names.RERUNS_FLAKY
 #: The most reruns allowed: every attempt's result is kept in memory until the merge, and
 #: a flake that needs more than this is a failure to fix, not to retry.
 MAX_RERUNS = 100
@@ -81,6 +84,7 @@ __all__ = [
     "MAX_RERUNS",
     "POOL_ENV",
     "RERUNS_ENV",
+    "RERUNS_FLAKY_ENV",
     "RESOURCES_ENV",
     "WAIT_TIMEOUT_ENV",
     "Settings",
@@ -113,6 +117,7 @@ class Settings:
         "notes",
         "pool",
         "reruns",
+        "reruns_flaky",
         "resources",
         "wait_timeout",
     )
@@ -127,6 +132,7 @@ class Settings:
         isolation_disabled: bool = False,
         notes: tuple[str, ...] = (),
         reruns: int = 0,
+        reruns_flaky: int = 0,
         gz_partition: bool = True,
         resources: dict[str, int] | None = None,
         capacity: dict[str, int] | None = None,
@@ -148,6 +154,9 @@ class Settings:
         self.notes = notes
         #: How many more times a failed test runs (--rerun-failures, ROS_ISOLATED_TEST_RERUNS).
         self.reruns = reruns
+        #: How many more times a failed test runs when the history calls it flaky
+        #: (--rerun-flaky, ROS_ISOLATED_TEST_RERUNS_FLAKY); the larger of the two counts.
+        self.reruns_flaky = reruns_flaky
         #: Give each test a Gazebo transport partition of its own (ROS_ISOLATED_TEST_GZ_PARTITION).
         self.gz_partition = gz_partition
         #: What the test holds besides its ID (--resources, ROS_ISOLATED_TEST_RESOURCES):
@@ -305,6 +314,7 @@ def read(
     resources: str | None = None,
     resources_origin: str = "--resources",
     isolation: str | None = None,
+    reruns_flaky: int | None = None,
 ) -> Settings:
     """The settings from options (None: not given) and ``environ`` (default: os.environ).
 
@@ -334,6 +344,9 @@ def read(
     if reruns is None:
         text = environ.get(RERUNS_ENV, "")
         reruns = reruns_from(text) if text.strip() else 0
+    if reruns_flaky is None:
+        text = environ.get(RERUNS_FLAKY_ENV, "")
+        reruns_flaky = reruns_from(text, RERUNS_FLAKY_ENV) if text.strip() else 0
     try:
         explicit = parse(environ.get(CAPACITY_ENV, ""), CAPACITY_ENV)
     except ResourceSpecError as error:
@@ -364,6 +377,7 @@ def read(
         isolation_disabled=disables_isolation(environ.get(DISABLE_VAR)),
         notes=notes,
         reruns=reruns,
+        reruns_flaky=reruns_flaky,
         gz_partition=gz_partition,
         resources=request,
         capacity={**explicit, **capacity_for(request, explicit)},

@@ -28,6 +28,11 @@ never). Its :attr:`Durations.fingerprint` names the content (a hash of a canonic
 serialisation: the same for the same durations however the file is spaced), so results
 can say which plan ran them.
 
+A test history database (``history``) is read as the durations file
+``history durations`` would write from it (:func:`history_medians`): its first bytes say
+it is an SQLite file of ours, so a split may plan from the history itself; ``sqlite3`` is
+imported only then, and a JSON file is read as before.
+
 Several runs merge (:func:`merge`) test by test into the **median** of the runs that
 measured it: CI timings are noisy and now and then far off (a loaded machine, a test
 that hit its timeout); the median ignores one outlier where the mean or the maximum
@@ -52,6 +57,7 @@ from ros_isolated_test.text import display_text
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
+    import sqlite3
     from collections.abc import Iterable, Iterator, Mapping
     from pathlib import Path
 
@@ -63,14 +69,23 @@ MICROS = 1_000_000
 MAX_SECONDS = 7 * 24 * 3600
 #: The largest file read: 10,000 tests take about 600 KB.
 MAX_FILE_BYTES = 64 * 1024 * 1024
+#: The first bytes of every SQLite file, and where its header keeps ``application_id``.
+SQLITE_MAGIC = b"SQLite format 3\x00"
+_APPLICATION_ID_AT = 68
+#: ``PRAGMA application_id`` of a test history database ("RITH", ``history.store``).
+HISTORY_APPLICATION_ID = 0x52495448
+#: The last runs of a history whose median a split plans from, as ``history durations``.
+HISTORY_RUNS = 20
 
 __all__ = [
     "DURATIONS_ENV",
+    "HISTORY_RUNS",
     "MAX_SECONDS",
     "MICROS",
     "VERSION",
     "Durations",
     "DurationsError",
+    "history_medians",
     "load",
     "measured",
     "merge",
@@ -244,7 +259,11 @@ def _read_bytes(path: Path) -> bytes:
             raise _Wrong("it is not a regular file")
         os.set_blocking(fd, True)
         with os.fdopen(fd, "rb", closefd=False) as handle:
-            data = handle.read(MAX_FILE_BYTES + 1)
+            data = handle.read(len(SQLITE_MAGIC))
+            if data != SQLITE_MAGIC:  # a history database is read by SQLite, not whole
+                data += handle.read(MAX_FILE_BYTES + 1 - len(data))
+            else:
+                data += handle.read(_APPLICATION_ID_AT + 4 - len(data))
     except OSError as error:
         raise _Wrong(f"cannot read it: {error.strerror}") from None
     finally:
@@ -334,13 +353,66 @@ def _first_wrong(tests: dict[str, object]) -> None:
             raise _Wrong(f"test {display_text(key)!r}: {problem}")
 
 
+def history_medians(connection: sqlite3.Connection, runs: int = HISTORY_RUNS) -> dict[str, float]:
+    """Each test's median last-attempt seconds over the last ``runs`` runs of a history.
+
+    The one reading of durations from a history database (``history durations`` and a
+    split planning from the database both call it). Skipped and not-run attempts, and
+    attempts with no duration, are left out; a name kept as UTF-8 bytes (it had lone
+    surrogates) is decoded back as ``history.store`` keeps it.
+    """
+    import statistics
+
+    samples: dict[str, list[float]] = {}
+    rows = connection.execute(
+        "SELECT t.name, a.seconds FROM attempts a JOIN tests t ON t.id = a.test"
+        " WHERE a.run IN (SELECT id FROM runs ORDER BY started DESC, id DESC LIMIT ?)"
+        " AND a.seconds IS NOT NULL AND a.outcome NOT IN ('not run', 'skipped')"
+        " AND a.attempt = (SELECT max(b.attempt) FROM attempts b"
+        " WHERE b.run = a.run AND b.test = a.test)",
+        (runs,),
+    )
+    for name, seconds in rows:
+        key = name.decode("utf-8", "surrogatepass") if isinstance(name, bytes) else name
+        samples.setdefault(key, []).append(seconds)
+    return {name: statistics.median(values) for name, values in samples.items()}
+
+
+def _from_history(path: Path, head: bytes) -> Durations:
+    """The durations a history database gives, as ``history durations`` would write them."""
+    found = int.from_bytes(head[_APPLICATION_ID_AT : _APPLICATION_ID_AT + 4], "big")
+    if found != HISTORY_APPLICATION_ID:
+        raise _Wrong("it is an SQLite file of another program, not a test history")
+    import sqlite3
+
+    try:
+        connection = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True, timeout=60)
+    except sqlite3.Error as error:
+        raise _Wrong(f"cannot open the test history in it: {error}") from None
+    try:
+        medians = history_medians(connection)
+    except sqlite3.Error as error:
+        raise _Wrong(f"cannot read the test history in it: {error}") from None
+    finally:
+        connection.close()
+    try:
+        return measured(medians)
+    except (IdentityError, ValueError) as error:
+        raise _Wrong(f"its history holds no durations a split can use: {error}") from None
+
+
 def load(path: Path, origin: str = DURATIONS_ENV) -> Durations:
     """The durations in ``path``, read strictly; :class:`DurationsError` says what is wrong.
 
-    ``origin`` is the variable or option that named the file, said in the error.
+    ``path`` is a durations file or a test history database (the durations ``history
+    durations`` writes from it). ``origin`` is the variable or option that named the
+    file, said in the error.
     """
     try:
-        return Durations(_checked(_content(_read_bytes(path))))
+        data = _read_bytes(path)
+        if data.startswith(SQLITE_MAGIC):
+            return _from_history(path, data)
+        return Durations(_checked(_content(data)))
     except _Wrong as wrong:
         raise DurationsError(
             f"{named(origin, display_text(str(path)))}: {wrong}; name a durations file written "

@@ -176,6 +176,14 @@ def test_plain_colcon_test_isolates_every_test_and_names_its_page(
     page = workspace / line[4]
     assert page.is_file() and page.parent.name.startswith("test_")
     assert (workspace / "log" / "latest_test" / page.name).samefile(page)
+    # Recorded by default into the workspace's test history, this run once.
+    db = workspace / "ros_isolated_test_history.sqlite3"
+    shown = run_cli(["history", "--db", str(db), "--json"], pool_env)
+    assert shown.returncode == 0, shown.stderr
+    recorded = {item["test"]: item["runs"] for item in json.loads(shown.stdout)}
+    for token in ("ivy", "juniper", "kale", *SECOND[1]):
+        assert any(f"talker_{token}" in name for name in recorded), recorded
+    assert len(recorded) >= 7 and set(recorded.values()) == {1}, recorded
 
 
 @capabilities.CHROMIUM.mark

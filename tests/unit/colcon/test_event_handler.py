@@ -36,10 +36,12 @@ def test_colcon_test_ends_with_one_line(
     monkeypatch.setattr(
         "ros_isolated_test.colcon.event_handler.get_log_path", lambda: tmp_path / "log"
     )
+    monkeypatch.chdir(tmp_path)  # colcon's folder: the workspace, where its history is kept
     _run(_handler("test"), _results(tmp_path / "build" / "pkg", ("one", 5, False)))
     out = capsys.readouterr().out
     assert out.startswith("ros-isolated-test: 1 tests run, 0 failed, 0 flaky, on 1 domain IDs")
     assert (tmp_path / "log" / "ros_isolated_test.html").is_file()
+    assert (tmp_path / "ros_isolated_test_history.sqlite3").is_file()
 
 
 @pytest.mark.parametrize(("verb", "switch"), [("build", None), ("test", "off")])

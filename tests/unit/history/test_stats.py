@@ -40,3 +40,26 @@ def test_broken_since_the_first_failure_of_the_streak(tmp_path: Path) -> None:
     since = item.broken_since
     assert since is not None and since.number == 3
     assert item.as_json()["median_seconds"] == 4.0
+
+
+def test_before_run_judges_a_run_by_the_runs_before_it(tmp_path: Path) -> None:
+    """A failure after passes is new, whether or not its own run is recorded yet."""
+    _runs(tmp_path, "PPF")  # recorded runs 0-2 of pkg/t; run2 failed
+    db = tmp_path / "h.sqlite3"
+    (now,) = [path for path in (tmp_path / "run2").rglob("*.xml")]
+    past = stats.before_run(db, [tmp_path / "run2"])["pkg/t"]
+    assert (past.kind, past.strip, past.runs, past.failing) == ("new", "PP", 2, 0)
+    # Control: the whole window, the failing run in it, calls it flaky.
+    connection = store.connect(db, write=False)
+    (item,) = stats.tests(connection)
+    connection.close()
+    assert item.status == "flaky" and now.is_file()
+    # Failed in every run before: broken since the first of them; a pass among them: flaky.
+    for k, (outcomes, kind, since) in enumerate(
+        (("FFFF", "broken", "run 1"), ("PFFF", "flaky", ""))
+    ):
+        _runs(tmp_path / str(k), outcomes)
+        run = tmp_path / str(k) / "run3"
+        past = stats.before_run(tmp_path / str(k) / "h.sqlite3", [run])["pkg/t"]
+        assert (past.kind, past.strip, past.since[:5]) == (kind, outcomes[:3], since)
+    assert stats.before_run(tmp_path / "absent.sqlite3", [tmp_path / "run2"]) == {}
