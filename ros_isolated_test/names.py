@@ -39,6 +39,7 @@ ISOLATION = "ROS_ISOLATED_TEST_ISOLATION"
 SHARD = "ROS_ISOLATED_TEST_SHARD"
 DURATIONS = "ROS_ISOLATED_TEST_DURATIONS"
 HISTORY = "ROS_ISOLATED_TEST_HISTORY"
+HISTORY_BY_COLCON = "ROS_ISOLATED_TEST_HISTORY_BY_COLCON"
 COLCON = "ROS_ISOLATED_TEST_COLCON"
 HELD_DOMAIN_ID = "ROS_ISOLATED_TEST_HELD_DOMAIN_ID"
 
@@ -95,8 +96,15 @@ ENVIRONMENT = (
     Name(DURATIONS, "the durations file (absolute) the split balances by", "runner, plugin, shard"),
     Name(
         HISTORY,
-        "the history database run and the RUNNER record each result into",
-        "runner, history",
+        "the history database run records its test into, and the pytest plugin its "
+        "--junit-xml; colcon test (the extension) records its whole run there",
+        "runner, plugin, history, colcon extension",
+    ),
+    Name(
+        HISTORY_BY_COLCON,
+        "set by the colcon extension for colcon test: it records the whole run, so run "
+        "and the plugin under it record nothing of their own",
+        "set by the colcon extension, read by the runner and the plugin",
     ),
     Name(COLCON, "off: every colcon extension of ours off", "colcon extension"),
     Name(

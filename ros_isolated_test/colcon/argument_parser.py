@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from collections.abc import MutableMapping
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,7 @@ from colcon_core.argument_parser import (  # type: ignore[import-untyped]
 from colcon_core.logging import colcon_logger  # type: ignore[import-untyped]
 from colcon_core.plugin_system import satisfies_version  # type: ignore[import-untyped]
 
+from ros_isolated_test import names
 from ros_isolated_test.colcon import project_include, switch
 
 logger = colcon_logger.getChild(__name__)
@@ -46,7 +48,26 @@ class _ProjectIncludeDecorator(ArgumentParserDecorator):  # type: ignore[misc]
     def parse_args(self, *args: Any, **kwargs: Any) -> argparse.Namespace:
         parsed: argparse.Namespace = self._parser.parse_args(*args, **kwargs)
         add_include(parsed)
+        one_history_recorder(parsed, os.environ)
         return parsed
+
+
+def one_history_recorder(parsed: argparse.Namespace, environ: MutableMapping[str, str]) -> None:
+    """For ``colcon test``: the run is recorded once, whole, by the summary at its end.
+
+    colcon's environment is its tests' environment: ``ROS_ISOLATED_TEST_HISTORY_BY_COLCON``
+    tells ``run`` and the pytest plugin under it to record nothing of their own (each
+    would be a run of its own), and ``ROS_ISOLATED_TEST_HISTORY``, when the user named
+    none, becomes the workspace's database (absolute), which the summary records into and
+    the runners' flaky reruns read.
+    """
+    if getattr(parsed, "verb_name", None) != "test" or not switch.state(environ)[0]:
+        return
+    environ[names.HISTORY_BY_COLCON] = "1"
+    if not environ.get(names.HISTORY, ""):
+        from ros_isolated_test.history.store import DEFAULT_FILE
+
+        environ[names.HISTORY] = os.path.abspath(DEFAULT_FILE)
 
 
 def add_include(parsed: argparse.Namespace) -> None:

@@ -101,10 +101,11 @@ def history(
     """Record the run into the workspace's history, and what it says for the page.
 
     The database is ``<workspace>/ros_isolated_test_history.sqlite3`` (where ``history``
-    run in the workspace looks first). With ``ROS_ISOLATED_TEST_HISTORY`` set, the
-    runners and the plugin have recorded each test into that one already: it is read,
-    not recorded into again. Never raises: a database that cannot be used is the one
-    warning line returned, the page then without history.
+    run in the workspace looks first), or the one ``ROS_ISOLATED_TEST_HISTORY`` names:
+    the whole run as one, the only recorder of it (``run`` and the pytest plugin under
+    colcon record nothing of their own: see ``argument_parser.one_history_recorder``).
+    Never raises: a database that cannot be used is the one warning line returned, the
+    page then without history.
     """
     if workspace is None:
         return None, None
@@ -120,7 +121,7 @@ def history(
         run = gathered(paths)
     except Exception as error:  # the page reads the trees again and says what is wrong
         return None, f"{PREFIX} warning: not recorded in the test history: {error}"
-    warning = None if named is not None else record_trees(db, run)
+    warning = record_trees(db, run)
     if warning is not None:
         return None, warning
     try:

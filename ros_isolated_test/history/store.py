@@ -72,12 +72,19 @@ class StoreError(Exception):
     """
 
 
-def problem(path: Path, error: BaseException) -> StoreError:
-    """``error`` met on the database at ``path`` as one line naming the file."""
+#: The fix when there is no database yet: nothing to delete, a run to record.
+FIX_MISSING = (
+    "record a run first (ros-isolated-test history record, or colcon test with the "
+    "colcon extension), or name another with --db"
+)
+
+
+def problem(path: Path, error: BaseException, fix: str = FIX) -> StoreError:
+    """``error`` met on the database at ``path`` as one line naming the file and the fix."""
     from ros_isolated_test.text import display_text
 
     said = " ".join(str(error).split()) or type(error).__name__
-    return StoreError(f"history database {display_text(str(path))}: {said}; {FIX}")
+    return StoreError(f"history database {display_text(str(path))}: {said}; {fix}")
 
 
 def connect(path: Path, write: bool = True) -> sqlite3.Connection:
@@ -86,7 +93,7 @@ def connect(path: Path, write: bool = True) -> sqlite3.Connection:
     Raises :class:`StoreError` for any database that cannot be used as it is.
     """
     if not write and not path.exists():
-        raise problem(path, FileNotFoundError("no such file"))
+        raise problem(path, FileNotFoundError("no such file"), FIX_MISSING)
     try:
         if write:
             connection = sqlite3.connect(path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)

@@ -209,9 +209,9 @@ def decide(
     gz_partition = _partition_wanted(assignments, settings, env_origin)
     mode, asked = _isolation_wanted(assignments, settings, env_origin)
     env, notes = apply_assignments(environ, assignments)
-    # Reruns are this runner's to make: a runner started inside the test would make its
-    # own on top of them, N x N attempts.
+    # Reruns are this runner's to make: a runner inside the test would add N x N attempts.
     env.pop(RERUNS_ENV, None)
+    env.pop(names.RERUNS_FLAKY, None)
     # The test holds what its runner asked for: a runner inside it asking again would wait
     # for what its own parent holds.
     env.pop(RESOURCES_ENV, None)

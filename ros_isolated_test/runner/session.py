@@ -85,13 +85,19 @@ def run(request: RunRequest, console: BinaryIO | None = None) -> int:
             both.close()
     # A result or output file that could not be written is a failed run, never a silent pass.
     code = exit_codes.final(code, result.write_error, both.capture.file_error)
-    _recorded(result)
+    _recorded(request, result)
     return shard.exit_code(request, code, console)
 
 
-def _recorded(result: ResultFile) -> None:
-    """Step 7: the result file, final now, into the history the variable names, if any."""
-    db = settings.history_database()
+def _recorded(request: RunRequest, result: ResultFile) -> None:
+    """Step 7: ``run``'s result file, final now, into the history the variable names, if any.
+
+    ``run`` alone: a test run by ctest is one of a run of many, which one recorder takes
+    whole (the colcon extension, or ``history record`` over the build), never test by test.
+    """
+    if request.mode is not Mode.SHELL:
+        return
+    db = settings.history_to_record()
     if db is None or result.path is None or result.write_error:
         return
     # Only when asked: sqlite3 and the report's reading are not on a test's path otherwise.

@@ -186,6 +186,19 @@ def history_database(environ: Mapping[str, str] | None = None) -> Path | None:
     return Path(value) if value else None
 
 
+def history_to_record(environ: Mapping[str, str] | None = None) -> Path | None:
+    """The database ``run`` or the plugin records its own results into; None: not theirs.
+
+    None also under ``colcon test`` with our extension on (it sets
+    ``ROS_ISOLATED_TEST_HISTORY_BY_COLCON``): colcon records the whole run as one, and a
+    test or session recorded on its own as well would be a run of its own beside it.
+    """
+    environ = os.environ if environ is None else environ
+    if environ.get(names.HISTORY_BY_COLCON, ""):
+        return None
+    return history_database(environ)
+
+
 def split(
     option: str | None = None,
     origin: str = "--shard",

@@ -63,6 +63,10 @@ if TYPE_CHECKING:
 
 #: The file format this version writes and reads.
 VERSION = 1
+#: The rules ``shard.plan`` places tests by, in the plan's name: machines that would place
+#: one file's tests differently (another version of ours) never share a name, so the merge
+#: names them as different plans. Bump it whenever a file's placement changes.
+PLACEMENT = 2
 #: Microseconds in a second: the unit of every duration inside.
 MICROS = 1_000_000
 #: The longest duration a file may give: a week is no test's duration, but a unit slip.
@@ -141,16 +145,17 @@ class Durations:
         """16 hex digits of the SHA-256 of the canonical content: the same on every machine.
 
         The canonical form is compact JSON, keys sorted, ASCII only, durations in whole
-        milliseconds, or in microseconds (with ``"unit":"us"``) when one is finer: no
-        float formatting and no spacing of the file reaches it, and a file written to the
-        millisecond keeps the fingerprint older versions gave it (and the same plan).
+        milliseconds, or in microseconds (with ``"unit":"us"``) when one is finer, and
+        the placement rules (``"placement"``: :data:`PLACEMENT`): no float formatting and
+        no spacing of the file reaches it, and a version of ours that would place the
+        tests otherwise gives the file another name.
         """
         if self._fingerprint is None:
             import json
 
             ordered = self.ordered()
             values: Mapping[str, int] = self.micros
-            document: dict[str, object] = {"version": VERSION}
+            document: dict[str, object] = {"placement": PLACEMENT, "version": VERSION}
             if any(map(int.__mod__, values.values(), repeat(1000))):
                 document["unit"] = "us"
             else:

@@ -57,9 +57,10 @@ def test_each_run_is_recorded_and_the_page_reads_the_runs_before(
     assert _runs(workspace / DB, env) == {"pkg/stable": 3, "pkg/odd": 3}
 
 
-def test_with_the_variable_set_the_runners_record_and_the_page_reads_it(
+def test_with_the_variable_set_the_run_is_recorded_there_once_whole(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
+    """The named database, not the workspace's, gets the run (colcon is its one recorder)."""
     workspace = tmp_path / "ws"
     workspace.mkdir()
     named = tmp_path / "named.sqlite3"
@@ -68,7 +69,7 @@ def test_with_the_variable_set_the_runners_record_and_the_page_reads_it(
     environ = {"ROS_ISOLATED_TEST_HISTORY": str(named)}
     summary.summarise([_run(tmp_path, 2, True)], log, environ, workspace=workspace)
     assert not (workspace / DB).exists()
-    assert _runs(named, env) == {"pkg/stable": 1, "pkg/odd": 1}  # the runners' to record
+    assert _runs(named, env) == {"pkg/stable": 2, "pkg/odd": 2}
     assert "new: passed its last" not in (log / summary.PAGE).read_text(encoding="utf-8")
     assert "broken since run 1" in (log / summary.PAGE).read_text(encoding="utf-8")
 

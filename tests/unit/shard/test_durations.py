@@ -215,7 +215,7 @@ def test_a_quick_test_is_written_and_read_back_to_the_microsecond(tmp_path: Path
 
 
 def test_a_file_written_to_the_millisecond_reads_as_before(tmp_path: Path) -> None:
-    """An older version's file: the same seconds, the same fingerprint, written back alike."""
+    """An older version's file: the same seconds, written back alike; named by today's rules."""
     old = (
         '{\n  "version": 1,\n  "durations": {\n    "p/a": 0.045,\n    "p/b": 0,\n'
         '    "p/c": 1.2,\n    "p/d": 310\n  }\n}\n'
@@ -223,8 +223,10 @@ def test_a_file_written_to_the_millisecond_reads_as_before(tmp_path: Path) -> No
     path = _file(tmp_path, old)
     loaded = load(path)
     assert loaded.micros == {"p/a": 45000, "p/b": 0, "p/c": 1200000, "p/d": 310000000}
-    # The canonical form of a file to the millisecond is the one older versions hashed.
-    canonical = b'{"durations":{"p/a":45,"p/b":0,"p/c":1200,"p/d":310000},"version":1}'
+    # To the millisecond as before, with the placement rules it is planned by.
+    canonical = (
+        b'{"durations":{"p/a":45,"p/b":0,"p/c":1200,"p/d":310000},"placement":2,"version":1}'
+    )
     assert loaded.fingerprint == hashlib.sha256(canonical).hexdigest()[:16]
     write(tmp_path / "again.json", loaded)
     assert (tmp_path / "again.json").read_text() == old
@@ -354,15 +356,20 @@ def test_the_fingerprint_is_of_the_content_not_the_bytes(tmp_path: Path) -> None
 
 
 def test_the_fingerprint_is_sha256_of_the_canonical_form() -> None:
-    """Pinned: the same on every machine and Python, and from one version of ours to the next."""
+    """Pinned: the same on every machine and Python; another placement, another name."""
     loaded = Durations({"pkg/test_a": 1500000, "pkg/test_b": 12000000})
-    canonical = b'{"durations":{"pkg/test_a":1500,"pkg/test_b":12000},"version":1}'
+    canonical = b'{"durations":{"pkg/test_a":1500,"pkg/test_b":12000},"placement":2,"version":1}'
     assert loaded.fingerprint == hashlib.sha256(canonical).hexdigest()[:16]
-    assert loaded.fingerprint == "73a3e8586c369f12"
+    # Control: the name the same content had under the rules before (placement 1, unsaid).
+    before = b'{"durations":{"pkg/test_a":1500,"pkg/test_b":12000},"version":1}'
+    assert hashlib.sha256(before).hexdigest()[:16] == "73a3e8586c369f12" != loaded.fingerprint
     assert Durations({}).fingerprint != loaded.fingerprint
     # A value finer than a millisecond: in microseconds, the unit said.
     finer = Durations({"pkg/test_a": 1500000, "pkg/test_b": 317})
-    canonical = b'{"durations":{"pkg/test_a":1500000,"pkg/test_b":317},"unit":"us","version":1}'
+    canonical = (
+        b'{"durations":{"pkg/test_a":1500000,"pkg/test_b":317},"placement":2,'
+        b'"unit":"us","version":1}'
+    )
     assert finer.fingerprint == hashlib.sha256(canonical).hexdigest()[:16]
     # Control: no two contents share one form (1.5 s and 317 us is not 1500 and 0.317 ms).
     assert finer.fingerprint != Durations({"pkg/test_a": 1500000, "pkg/test_b": 0}).fingerprint
