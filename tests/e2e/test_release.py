@@ -9,8 +9,8 @@ built by scripts/package_deb.sh (bloom, then dpkg-buildpackage with its tests), 
 control file, copyright and layout say what package.xml and pyproject.toml say. Installing
 the .deb with apt is tests/e2e/test_release_apt.py.
 
-The colcon extension (the fourth way in the wheel should give) does not exist yet: its
-check joins ``test_the_wheel_alone_in_a_fresh_venv_gives_every_way_in`` when it does.
+The colcon extension, the fourth way in, is there once colcon is installed beside the
+wheel: ``colcon extensions`` of that venv lists it.
 """
 
 from __future__ import annotations
@@ -57,8 +57,9 @@ def dists(source: Path, tmp_path_factory: pytest.TempPathFactory) -> Dists:
 
 @pytest.fixture(scope="module")
 def installed(dists: Dists, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A fresh venv holding the wheel (its dependencies from pip) and pytest, nothing else."""
-    return release.fresh_venv(tmp_path_factory.mktemp("venv") / "v", str(dists.wheel), "pytest")
+    """A fresh venv: the wheel (its dependencies from pip), pytest, colcon and its devtools."""
+    root = tmp_path_factory.mktemp("venv") / "v"
+    return release.fresh_venv(root, str(dists.wheel), "pytest", "colcon-core", "colcon-devtools")
 
 
 @pytest.fixture(scope="module")
@@ -172,6 +173,35 @@ def test_the_wheel_alone_in_a_fresh_venv_gives_every_way_in(
     )  # fmt: skip
     assert plain.returncode == 1, plain.stdout + plain.stderr
     assert "KeyError: 'ROS_DOMAIN_ID'" in plain.stdout, plain.stdout
+
+    # colcon of that venv loads the extension: both its extensions listed (the variable's
+    # entry point is listed by colcon --help, not here).
+    assert _colcon_extensions_of_ours(installed, tmp_path) == EXTENSION_POINTS
+    # The control: blocked as docs/install.md says, colcon lists none of them.
+    blocked = ":".join(f"{point}.ros_isolated_test" for point in EXTENSION_POINTS)
+    assert not _colcon_extensions_of_ours(
+        installed, tmp_path, {"COLCON_EXTENSION_BLOCKLIST": blocked}
+    )
+
+
+#: The colcon extension points ``colcon extensions`` lists the colcon extension under.
+EXTENSION_POINTS = ["colcon_core.argument_parser", "colcon_core.event_handler"]
+
+
+def _colcon_extensions_of_ours(
+    venv: Path, cwd: Path, env: dict[str, str] | None = None
+) -> list[str]:
+    """The extension points under which ``colcon extensions`` lists ``ros_isolated_test``."""
+    home = {"HOME": str(cwd), **(env or {})}
+    listed = _in_fresh_venv(venv, cwd, "colcon", "extensions", env=home)
+    assert listed.returncode == 0, listed.stdout + listed.stderr
+    points, point = [], ""
+    for line in listed.stdout.splitlines():
+        if line and not line.startswith(" "):
+            point = line.rstrip(":").strip()
+        elif line.strip().startswith("ros_isolated_test:"):
+            points.append(point)
+    return sorted(points)
 
 
 # -- the Debian package -----------------------------------------------------------------------
