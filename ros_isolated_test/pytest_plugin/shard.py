@@ -18,9 +18,13 @@ can measure it: pytest's own ``time`` has three decimals, a quicker item would b
 ``--junit-xml`` gets the suite properties ``shard`` and ``shard_plan`` and,
 beside it, the machine's record (``shard.record``): a merge then knows this share
 reported even when it ran nothing. The record says ``started`` from the session's start
-(an older ``--junit-xml`` file there is removed then) until pytest has written the
-file: a session killed in between leaves a started record and no results, which the
-merge names as a failure of the share.
+until pytest has written the file. The record is one per folder and share, while several
+sessions of one share may write there (``pytest a --junit-xml=out/a.xml``, then ``b``):
+so the session also writes, at its start, a placeholder ``--junit-xml`` (an older file
+there goes), one error case in its share saying the session ended before writing its
+results, which pytest's own file replaces at the end (it rewrites the file whole). A
+session killed in between leaves the placeholder, which fails the merge however the
+record reads.
 
 Under a RUNNER of ours (ament_add_pytest_test through the CMake include) the runner has
 decided for the whole test: its ``ROS_ISOLATED_TEST_SHARD`` is not passed on, and an
@@ -196,10 +200,11 @@ def _junit_file(sharding: Sharding, config: pytest.Config) -> Path | None:
 
 
 def leave_record(sharding: Sharding, config: pytest.Config) -> None:
-    """Leave the machine's record, started, beside ``--junit-xml``; an older file there goes.
+    """Leave the machine's record, started, beside ``--junit-xml``, and the placeholder there.
 
-    Until :func:`complete_record`, the record says the session started: killed before
-    pytest writes its file, it leaves no results, and no older file to be taken for them.
+    Until :func:`complete_record`, the record says the session started; until pytest
+    writes its file, the placeholder (:func:`placeholder`) says this session did not end:
+    killed, it leaves an error in its share, and no older file to be taken for results.
     """
     junit = _junit_file(sharding, config)
     if junit is None or sharding.selection is None:
@@ -217,15 +222,47 @@ def leave_record(sharding: Sharding, config: pytest.Config) -> None:
             f"({error.strerror or error}): a merge of the machines' results would not know "
             "this share reported; make the folder writable"
         ) from None
+    from ros_isolated_test.atomic_file import special_kind, write_atomically
+
+    if special_kind(junit) is not None:
+        return  # /dev/null, a FIFO: never replaced; pytest writes into it at the end
     try:
-        if junit.is_file():
-            junit.unlink()
+        write_atomically(junit, placeholder(sharding, junit))
     except OSError as error:
         raise pytest.UsageError(
-            f"ros-isolated-test: cannot remove the --junit-xml file {junit} of an earlier run "
-            f"({error.strerror or error}): were this session to die, a merge would count it "
-            "as this share's results; make the folder writable"
+            f"ros-isolated-test: cannot write the placeholder --junit-xml file {junit} "
+            f"({error.strerror or error}): were this session to die, a merge would not know "
+            "it left no results; make the folder writable"
         ) from None
+
+
+def placeholder(sharding: Sharding, junit: Path) -> bytes:
+    """The result ``junit`` holds until pytest writes it: one error, in this session's share.
+
+    Its suite carries the share's properties, so the merge counts it in its share, and is
+    named ``<package>.<junit file's name>``: one test per junit file, so two sessions of
+    one share writing into one folder leave two. Stamped (``placeholder_written_at``), so
+    ``report --durations`` reads no run time from it.
+    """
+    import time
+
+    from ros_isolated_test.report.shard import SESSION_ENDED_TYPE
+    from ros_isolated_test.xunit.canonical import test_name_of
+    from ros_isolated_test.xunit.model import Case, Outcome, Suite
+    from ros_isolated_test.xunit.placeholder import stamped
+    from ros_isolated_test.xunit.serialise import serialize
+    from ros_isolated_test.xunit.validate import hostname, timestamp
+
+    assert sharding.selection is not None
+    name = f"{sharding.package}.{test_name_of(junit)}"
+    message = (
+        f"the pytest session of shard {sharding.selection.share} ended before writing its "
+        "results (killed or crashed); run that share again"
+    )
+    case = Case.saying(name, "pytest session", Outcome.ERROR, message, SESSION_ENDED_TYPE)
+    now = time.time()
+    properties = stamped(dict(sharding.properties), now)
+    return serialize(Suite(name, [case], 0.0, timestamp(now), hostname(), properties))
 
 
 def complete_record(sharding: Sharding, config: pytest.Config) -> None:

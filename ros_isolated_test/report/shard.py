@@ -15,7 +15,10 @@ a test of another share left no result; what can go wrong is what the sum cannot
   several trees (a test not run through the RUNNER or the plugin runs on every machine);
 - a share that **started and left no results**: a pytest session of the share that died
   before writing its ``--junit-xml`` (SIGKILL, SIGSEGV, OOM) leaves its record
-  ``started`` and no result file of that share beside it, so its tests are not counted.
+  ``started`` and no result file of that share beside it, so its tests are not counted;
+  and since several sessions of one share may write into one folder (one record for
+  all), each session's ``--junit-xml`` holds a placeholder until pytest replaces it: one
+  error case of type :data:`SESSION_ENDED_TYPE`, counted, and named here per file.
 
 A record speaks only for its own run: the machine that writes one removes every other
 record in its folder (``shard.record``), so a record an earlier run left in a reused or
@@ -41,6 +44,9 @@ from ros_isolated_test.text import display_text
 
 #: Examples named per kind of problem; more are counted.
 SHOWN = 5
+#: The ``type`` of the error case in the pytest plugin's placeholder ``--junit-xml``: the
+#: session of a share that wrote it ended before pytest replaced it with its results.
+SESSION_ENDED_TYPE = "PytestSessionEnded"
 
 __all__ = ["Split"]
 
@@ -60,6 +66,7 @@ class Split:
         #: (folder, share) of every result file that says its share.
         self._results: set[tuple[Path, Share]] = set()
         self._started: list[str] = []
+        self._placeholders: list[str] = []
 
     def _share(self, share: Share, plan: str, host: str) -> None:
         hosts = self.plans.setdefault((share.total, plan), {}).setdefault(share.index, set())
@@ -86,6 +93,14 @@ class Split:
             else:
                 host = next((s.attrs.get("hostname", "") for s in read.suites), "")
                 self._share(share, properties.get(PLAN_PROPERTY, "") or "?", host)
+                if any(case.type == SESSION_ENDED_TYPE for case in item.cases):
+                    self._placeholders.append(
+                        f"shard {share.index} of {share.total}: a pytest session started and "
+                        f"left no results ({display_text(str(item.path))} is still its "
+                        "placeholder, killed or crashed): its tests there are not counted; "
+                        "run that share again"
+                    )
+                    return  # no result: it names no test, and completes no record
                 self._results.add((item.path.parent, share))
                 where = f"shard {share}"
         tests = named_tests(item)
@@ -139,6 +154,7 @@ class Split:
             return []
         found = list(self._odd)
         found += self._started
+        found += self._placeholders
         found += self._plans_differ()
         found += self._missing()
         found += self._twice()

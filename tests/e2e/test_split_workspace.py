@@ -430,15 +430,17 @@ def test_a_share_left_out_fails_the_merge_naming_it(split: Split) -> None:
 
 def test_a_share_whose_pytest_session_was_killed_fails_the_merge_naming_it(split: Split) -> None:
     """Share 1 again in the reused build, its ament_python session SIGKILLed mid-run: its
-    record says started, no pytest.xml is there (the last run's was removed at the start,
-    not taken for this one's), and the merge names it. The control: share 1 whole
-    (test_the_merged_report_counts_what_the_whole_run_counted)."""
+    record says started, its pytest.xml is still the plugin's placeholder (the last run's
+    was replaced at the start, not taken for this one's), and the merge names it. The
+    control: share 1 whole (test_the_merged_report_counts_what_the_whole_run_counted)."""
     trees = _shard_trees(split)
     killed = split.trees["killed-1"]
-    assert not (killed / PYTHON / "pytest.xml").exists()
+    assert "ended before writing its results" in (killed / PYTHON / "pytest.xml").read_text()
     merged = _report(split, killed, trees[1], trees[2], json_out=False)
     assert merged.returncode == 1, merged.stdout
-    (line,) = [line for line in merged.stdout.splitlines() if "started and left" in line]
+    assert f"a pytest session started and left no results ({killed / PYTHON}" in merged.stdout
+    said = merged.stdout.splitlines()
+    (line,) = [line for line in said if "started and left no results in" in line]
     assert line.startswith(
         f"- shard 1 of {SHARES} started and left no results in {killed / PYTHON} ("
     )

@@ -1,8 +1,9 @@
 """``pytest_plugin.shard``: a pytest session runs its share of a split, as real sessions.
 
 Each share's session deselects the others' items (they are not in its ``--junit-xml``),
-names every item it keeps by its identity, records its share beside the file (started
-until the file is written: a session killed mid-run fails the merge), and exits 0 when
+names every item it keeps by its identity, records its share beside the file (started,
+and the file a placeholder, until pytest writes it: a session killed mid-run fails the
+merge; more in test_shard_placeholder.py), and exits 0 when
 the split emptied its share (and only then: pytest's 5 stays 5). Every bad value is
 pytest's usage error naming the variable or option; under a runner's ID nothing is split
 again. Each beside its control.
@@ -195,9 +196,9 @@ KILLING = "import os, signal\n\n" + "".join(
 def test_a_share_whose_session_died_fails_the_merge_naming_it(
     tmp_path: Path, env: dict[str, str], signal_name: str
 ) -> None:
-    """Share 1's session dies mid-run: its started record, no --junit-xml (an earlier
-    one there is removed at the start), and the merge names it. The control: the same
-    sessions not killed merge whole, exit 0."""
+    """Share 1's session dies mid-run: its started record, its --junit-xml still the
+    placeholder (an earlier file there is replaced at the start), and the merge names
+    it. The control: the same sessions not killed merge whole, exit 0."""
     root = project(tmp_path / "pkg", KILLING)
     out = {index: tmp_path / f"share{index}" / "pytest.xml" for index in (1, 2)}
 
@@ -213,11 +214,14 @@ def test_a_share_whose_session_died_fails_the_merge_naming_it(
     record = out[1].parent / "ros_isolated_test_shard-1-of-2.json"
     assert "state" not in json.loads(record.read_text())
     assert share(1, KILL=signal_name) == -getattr(signal, signal_name)
-    assert not out[1].exists()
+    assert "ended before writing its results" in out[1].read_text()
     assert json.loads(record.read_text())["state"] == "started"
     merged = run_cli(["report", str(out[1].parent), str(out[2].parent)], env)
     assert merged.returncode == 1, merged.stdout + merged.stderr
     assert f"- shard 1 of 2 started and left no results in {out[1].parent} (" in merged.stdout
+    assert f"- shard 1 of 2: a pytest session started and left no results ({out[1]} " in (
+        merged.stdout
+    )
 
 
 def test_the_package_xml_that_switches_the_plugin_on_names_the_items(
