@@ -4,7 +4,9 @@ Upstream claims ID N by binding TCP port 32768+N. Binding the same port while we
 N keeps upstream's runner off our ID, and failing to bind it tells us upstream (or
 another program) has N, so both coordinators can share one machine. Which socket holds
 it (:func:`holding_sockets`) tells whose claim it is: the port lies in Linux's default
-ephemeral range, so anything may hold it for a while.
+ephemeral range, so anything may hold it for a while. Only Linux 6.8 and later show a
+socket that is bound and does not listen, as the coordinators' are
+(:func:`shows_bound_sockets`).
 """
 
 from __future__ import annotations
@@ -46,7 +48,8 @@ _NETLINK_SOCK_DIAG = 4
 _SOCK_DIAG_BY_FAMILY = 20
 _DUMP_REQUEST = 0x301  # NLM_F_REQUEST | NLM_F_DUMP
 _NLMSG_ERROR, _NLMSG_DONE = 2, 3
-_STATES = 1 << 10 | 1 << 13
+_LISTENING = 1 << 10
+_STATES = _LISTENING | 1 << 13
 _IPPROTO_TCP = 6
 
 
@@ -57,23 +60,61 @@ def holding_sockets(domain_id: int) -> frozenset[int] | None:
     in no /proc/net/tcp table: only sock_diag's dump of bound-only sockets shows it, and
     only from Linux 6.8 (older kernels show none: an empty set, no evidence of anyone).
     """
+    return _holders(PORT_BASE + domain_id, _STATES)
+
+
+def listening_sockets(domain_id: int) -> frozenset[int] | None:
+    """The inodes of the TCP sockets listening on 32768+ID, which every kernel shows.
+
+    No coordinator listens: a listener holding the port is visibly someone else.
+    """
+    return _holders(PORT_BASE + domain_id, _LISTENING)
+
+
+#: The probe's answer, once asked (:func:`shows_bound_sockets`).
+_bound_shown: bool | None = None
+
+
+def shows_bound_sockets() -> bool:
+    """Whether this kernel's dump shows a socket bound without listen() (Linux 6.8+).
+
+    Probed once, by binding one (a free port) and looking for its inode; asked only
+    where the answer explains a refusal, never on a test's way in.
+    """
+    global _bound_shown  # one probe per process
+    if _bound_shown is None:
+        import os  # only here: not on every test's path
+
+        probe = _socket.socket(_socket.AF_INET, _socket.SOCK_STREAM)
+        try:
+            probe.bind(("127.0.0.1", 0))
+            found = _holders(probe.getsockname()[1], _STATES)
+            _bound_shown = found is not None and os.fstat(probe.fileno()).st_ino in found
+        except OSError:
+            _bound_shown = False
+        finally:
+            probe.close()
+    return _bound_shown
+
+
+def _holders(port: int, states: int) -> frozenset[int] | None:
+    """The inodes of the TCP sockets on ``port`` in ``states``, both families; None: cannot tell."""
     import struct  # only here: not on every test's path
 
-    port = PORT_BASE + domain_id
     found: set[int] = set()
     try:
         for family in (_socket.AF_INET, _socket.AF_INET6):
-            found.update(_dump(family, port))
+            found.update(_dump(family, port, states))
     except (OSError, struct.error):
         return None
     return frozenset(found)
 
 
-def _dump(family: int, port: int) -> list[int]:
+def _dump(family: int, port: int, states: int) -> list[int]:
     """One family's dump, read to its end: the inodes of sockets on ``port``."""
     import struct as _struct  # only here: not on every test's path
 
-    request = _struct.pack("=BBBBI", family, _IPPROTO_TCP, 0, 0, _STATES) + bytes(48)
+    request = _struct.pack("=BBBBI", family, _IPPROTO_TCP, 0, 0, states) + bytes(48)
     header = _struct.pack("=IHHII", 16 + len(request), _SOCK_DIAG_BY_FAMILY, _DUMP_REQUEST, 1, 0)
     inodes: list[int] = []
     sock = _socket.socket(_socket.AF_NETLINK, _socket.SOCK_DGRAM, _NETLINK_SOCK_DIAG)

@@ -20,7 +20,8 @@ hold it, our own runner holding that ID too). So colcon's counts only when colco
 holds the port: a socket bound to it among colcon's own descriptors, which only the
 coordinator's extension, loaded in that colcon, makes (a Python module leaves no other
 mark in /proc). Where the kernel cannot show who holds a port (sock_diag's bound-only
-sockets: Linux 6.8 and later) or colcon's descriptors cannot be read, it is no tool's.
+sockets: Linux 6.8 and later) or colcon's descriptors cannot be read, it is no tool's;
+:func:`unseen_colcon` tells the first case apart, for the refusal to say why.
 
 A user's ``export ROS_DOMAIN_ID=5`` is never taken for a tool's: the shell that ran it is
 the first ancestor without the value, and a shell is no tool; ``ROS_DOMAIN_ID=5 colcon
@@ -146,11 +147,66 @@ def kind_of(pid: int, block: bytes) -> str | None:
     return None
 
 
-def setter_of(pid: int, value: str | None = None) -> Setter | None:
+#: What keeps colcon's coordinator from setting IDs at all (colcon reads it).
+BLOCK_COORDINATOR = (
+    "COLCON_EXTENSION_BLOCKLIST=colcon_core.shell.ros_domain_id:"
+    "colcon_core.event_handler.ros_domain_id"
+)
+
+
+def setter_of(pid: int, value: str | None = None, bound_shown: bool | None = None) -> Setter | None:
     """The tool that set ``pid``'s ROS_DOMAIN_ID (``value``; None: the one it started with).
 
     None when the value was set by anyone else (a shell, a script, the process itself),
     when the ID's port is not held, or when /proc cannot show the ancestors.
+    ``bound_shown=False`` reads sockets as a kernel before Linux 6.8 shows them.
+    """
+    found = _first_without(pid, value)
+    return None if found is None else _tool(*found, bound_shown)
+
+
+def unseen_colcon(pid: int, value: str, bound_shown: bool | None = None) -> Setter | None:
+    """colcon, which set ``value`` for ``pid``, where nobody can tell whether it holds the port.
+
+    The ID's port is taken, by no listener (no coordinator listens), and the kernel shows
+    no bound-only socket (``bound_shown``; None: ask ``port_guard``'s probe, which runs
+    only here; False: as before Linux 6.8): the holder may be colcon's coordinator or any
+    program, the ID the coordinator's or an environment hook's. None wherever
+    :func:`setter_of` can answer.
+    """
+    found = _first_without(pid, value)
+    if found is None:
+        return None
+    setter, block, _, own_value = found
+    domain_id = domain_value(value)
+    if domain_id is None or not 0 <= domain_id <= HIGHEST_VALID_ID:
+        return None
+    if kind_of(setter, block) != COLCON or not port_guard.port_is_taken(domain_id):
+        return None
+    if port_guard.listening_sockets(domain_id) or (
+        port_guard.shows_bound_sockets() if bound_shown is None else bound_shown
+    ):
+        return None
+    return Setter(COLCON, setter, proc.cmdline(setter), value, domain_id, own_value)
+
+
+def unseen_cause(colcon: Setter) -> str:
+    """Why :func:`unseen_colcon`'s ID is refused, and the fixes of colcon's side: one line."""
+    return (
+        f"ROS_DOMAIN_ID is already set to {colcon.value!r} by colcon (pid {colcon.pid}) and "
+        f"port {port_guard.PORT_BASE + colcon.domain_id} is taken, but colcon's domain-ID "
+        "coordinator cannot be told apart on this kernel (Linux before 6.8 shows no "
+        "bound-only sockets): the port may be any program's and the ID a package's "
+        "environment hook's; fix: run on Linux 6.8 or later, or block the coordinator "
+        f"({BLOCK_COORDINATOR}) and the runner picks a free ID"
+    )
+
+
+def _first_without(pid: int, value: str | None) -> tuple[int, bytes, str, str | None] | None:
+    """The first ancestor of ``pid`` that did not start with ``value``, and what it set.
+
+    Its PID, environment block, the value and its own; None when ``pid`` did not start
+    with the value, or /proc shows no such ancestor.
     """
     current = pid
     for depth in range(_DEPTH):
@@ -164,7 +220,7 @@ def setter_of(pid: int, value: str | None = None) -> Setter | None:
             if value is None or started_with != value:
                 return None  # set in this process after it started: not by its parent
         elif value is not None and started_with != value:
-            return _tool(current, block, value, started_with)
+            return current, block, value, started_with
         stat = proc.read_stat(current)
         if stat is None or stat.ppid <= 0:
             return None  # the top of what this PID namespace shows
@@ -172,26 +228,32 @@ def setter_of(pid: int, value: str | None = None) -> Setter | None:
     return None
 
 
-def _tool(pid: int, block: bytes, value: str, own_value: str | None) -> Setter | None:
+def _tool(
+    pid: int, block: bytes, value: str, own_value: str | None, bound_shown: bool | None
+) -> Setter | None:
     """``pid`` set ``value`` for its children: a :class:`Setter` if it is a tool holding it."""
     kind = kind_of(pid, block)
     domain_id = domain_value(value)
     if kind is None or domain_id is None or not 0 <= domain_id <= HIGHEST_VALID_ID:
         return None
     if kind == COLCON:
-        if not holds_port(pid, domain_id):
+        if not holds_port(pid, domain_id, bound_shown):
             return None  # a hook's or anyone's value: the coordinator holds what it sets
     elif not port_guard.port_is_taken(domain_id):
         return None
     return Setter(kind, pid, proc.cmdline(pid), value, domain_id, own_value)
 
 
-def holds_port(pid: int, domain_id: int) -> bool:
+def holds_port(pid: int, domain_id: int, bound_shown: bool | None = None) -> bool:
     """Whether process ``pid`` itself holds the ID's port (not a child, not another process).
 
-    One of its descriptors is a socket the kernel shows bound to 32768+ID.
+    One of its descriptors is a socket the kernel shows bound to 32768+ID (listening only,
+    for ``bound_shown=False``: what a kernel before Linux 6.8 shows).
     """
-    holding = port_guard.holding_sockets(domain_id)
+    if bound_shown is False:
+        holding = port_guard.listening_sockets(domain_id)
+    else:
+        holding = port_guard.holding_sockets(domain_id)
     if not holding:
         return False
     wanted = {f"socket:[{inode}]" for inode in holding}

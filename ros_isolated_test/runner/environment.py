@@ -236,9 +236,7 @@ def decide(
                 f"{origin} (the runner picks a free ID), or add {DISABLE_VAR}=1 to "
                 f"{env_origin} (or the runner's environment) to run without isolation"
             )
-        replaced = _tool_domain(environ) if DOMAIN_VAR in environ else None
-        if DOMAIN_VAR in environ and replaced is None:
-            raise RefusedError(_preset_refusal(environ[DOMAIN_VAR]))
+        replaced = _tool_domain(environ[DOMAIN_VAR]) if DOMAIN_VAR in environ else None
         if replaced is not None and replaced.own_value is not None:
             # A user's export that the tool put aside: still the user's, refused as ever.
             where = (
@@ -304,17 +302,19 @@ def _preset_refusal(value: str, where: str = "") -> str:
     )
 
 
-def _tool_domain(environ: Mapping[str, str]) -> Setter | None:
-    """The tool that set this process's ROS_DOMAIN_ID for it and holds that ID, if one did.
+def _tool_domain(value: str, bound_shown: bool | None = None) -> Setter:
+    """The tool (``domain_coordinator.upstream``) that set ``value`` here and holds it.
 
-    colcon's domain-ID coordinator, upstream's runner or Kilted's fixture: an ID of
-    theirs is replaced by one of the pool (``domain_coordinator.upstream``: how it is
-    told from a user's export, which is refused). Only when ``environ`` is this process's
-    own: the evidence is in /proc.
+    Else refused, saying why where this kernel hides colcon's (``bound_shown``: its probe).
     """
     from ros_isolated_test.domain_coordinator import upstream
 
-    return upstream.setter_of(os.getpid(), environ[DOMAIN_VAR])
+    if (setter := upstream.setter_of(os.getpid(), value, bound_shown)) is not None:
+        return setter
+    if (unseen := upstream.unseen_colcon(os.getpid(), value, bound_shown)) is None:
+        raise RefusedError(_preset_refusal(value))
+    fix = f"or set {DISABLE_VAR}=1 to run without isolation"
+    raise RefusedError(f"refusing to run: {upstream.unseen_cause(unseen)}, {fix}")
 
 
 def _isolation_wanted(

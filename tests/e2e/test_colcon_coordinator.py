@@ -270,6 +270,7 @@ def coordinated(workspace: Workspace, pool_env: dict[str, str]) -> Run:
     return Run(_read_records(records), workspace.allocated("log"), output, seen, table)
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_every_test_runs_on_an_id_of_its_own_none_of_colcons(coordinated: Run) -> None:
     records, allocated = coordinated.records, coordinated.allocated
     assert set(allocated) >= set(PACKAGE_OF.values()), coordinated.output[-3000:]
@@ -281,6 +282,7 @@ def test_every_test_runs_on_an_id_of_its_own_none_of_colcons(coordinated: Run) -
     assert not set(ids) & set(allocated.values()), (ids, allocated)
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_tests_of_both_packages_ran_at_once(coordinated: Run) -> None:
     records = coordinated.records
     together = [
@@ -294,6 +296,7 @@ def test_tests_of_both_packages_ran_at_once(coordinated: Run) -> None:
     assert together, {t: (r.start, r.end) for t, r in records.items()}
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_each_result_says_which_of_colcons_ids_it_replaced(
     coordinated: Run, workspace: Workspace
 ) -> None:
@@ -323,6 +326,7 @@ def test_each_result_says_which_of_colcons_ids_it_replaced(
     ), pytest_xml[:3000]
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_status_names_colcons_ids_and_what_replaced_them(coordinated: Run) -> None:
     colcon_rows = {use.domain_id for use in coordinated.seen if use.via == "colcon"}
     assert colcon_rows and colcon_rows <= set(coordinated.allocated.values()), coordinated.seen
@@ -341,6 +345,7 @@ def test_status_names_colcons_ids_and_what_replaced_them(coordinated: Run) -> No
     assert "[replaced colcon's ROS_DOMAIN_ID " in coordinated.table, coordinated.table
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_a_hand_set_id_is_still_refused(workspace: Workspace) -> None:
     """``ROS_DOMAIN_ID=<id> colcon test``: colcon's coordinator gives the task another ID,
     but the user's is the one that counts, refused with the message it always had."""
@@ -443,7 +448,9 @@ def _refused(workspace: Workspace, domain_id: int, output: str) -> None:
     assert "ros_domain_id_replaced" not in result.properties
 
 
-@pytest.mark.parametrize("holder", ["none", "bound", "listening"])
+@pytest.mark.parametrize(
+    "holder", ["none", pytest.param("bound", marks=capabilities.SOCK_DIAG_BOUND.mark), "listening"]
+)
 def test_a_hooks_id_is_refused_without_the_coordinator_whoever_holds_its_port(
     workspace: Workspace, holder: str
 ) -> None:
@@ -455,6 +462,7 @@ def test_a_hooks_id_is_refused_without_the_coordinator_whoever_holds_its_port(
     _refused(workspace, domain_id, output)
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_a_hooks_id_is_refused_with_the_coordinator_which_holds_only_its_own(
     workspace: Workspace,
 ) -> None:

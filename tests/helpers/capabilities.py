@@ -179,6 +179,33 @@ def _ipv6() -> str | None:
     return None
 
 
+def _sock_diag_bound() -> str | None:
+    """sock_diag's dump shows a TCP socket bound without listen(), as coordinators hold it.
+
+    Probed here by hand (a port of the coordinators' range, its socket's inode looked for
+    in ``holding_sockets``), not by the product's own probe, which tests check against it.
+    """
+    from ros_isolated_test.domain_coordinator import port_guard
+
+    for domain_id in range(232, -1, -1):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            try:
+                probe.bind(("", port_guard.PORT_BASE + domain_id))
+            except OSError:
+                continue  # taken: try the next
+            held = port_guard.holding_sockets(domain_id)
+            if held is not None and os.fstat(probe.fileno()).st_ino in held:
+                return None
+            break
+    else:
+        return "no port 32768-33000 was free to probe sock_diag's bound-only sockets with"
+    kernel = os.uname().release
+    return (
+        f"needs Linux 6.8 or later (here {kernel}): sock_diag shows no bound-only TCP socket, "
+        "which tells colcon's domain-ID coordinator's port from anyone's"
+    )
+
+
 def _shared() -> str | None:
     if SHARED.is_dir():
         return None
@@ -460,6 +487,8 @@ OTHER_USERS = Capability("other-users", _other_users)
 SETPRIV = Capability("setpriv", _setpriv)
 SETUID_HELPER = Capability("setuid-helper", _setuid_helper)
 IPV6 = Capability("ipv6", _ipv6)
+#: sock_diag's dump of bound-only sockets (Linux 6.8+): colcon's coordinator told apart.
+SOCK_DIAG_BOUND = Capability("sock-diag-bound", _sock_diag_bound)
 #: The outside tier: tests that read ``../shared`` (present in CI, absent in a fresh clone).
 OUTSIDE = Capability("outside-tier", _shared)
 RCLPY = Capability("rclpy", _module("rclpy"))

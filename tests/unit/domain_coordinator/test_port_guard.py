@@ -42,7 +42,9 @@ from ros_isolated_test.domain_coordinator.port_guard import (
     PORT_BASE,
     claim_port,
     holding_sockets,
+    listening_sockets,
     port_is_taken,
+    shows_bound_sockets,
 )
 
 #: Says it runs (its exec done: descriptors closed on exec are closed by then), then keeps
@@ -95,7 +97,11 @@ def test_a_port_another_socket_holds_bound_and_idle_cannot_be_claimed() -> None:
 
 
 @pytest.mark.parametrize("family", [socket.AF_INET, socket.AF_INET6], ids=["ipv4", "ipv6"])
-@pytest.mark.parametrize("listening", [False, True], ids=["bound", "listening"])
+@pytest.mark.parametrize(
+    "listening",
+    [pytest.param(False, marks=capabilities.SOCK_DIAG_BOUND.mark), True],
+    ids=["bound", "listening"],
+)
 def test_the_sockets_holding_a_port_are_named_bound_or_listening(
     family: socket.AddressFamily, listening: bool
 ) -> None:
@@ -114,6 +120,26 @@ def test_the_sockets_holding_a_port_are_named_bound_or_listening(
     finally:
         sock.close()
     assert holding_sockets(domain_id) == frozenset()
+
+
+def test_the_kernel_is_said_to_show_bound_sockets_as_it_does_and_listeners_always() -> None:
+    """The product's probe agrees with the capability's own (True on Linux 6.8+, False
+    before): a bound socket is among the port's holders exactly then. The control: every
+    kernel shows the same socket once it listens, and never among listeners before."""
+    shown = capabilities.SOCK_DIAG_BOUND.missing is None
+    assert shows_bound_sockets() is shown
+    assert shows_bound_sockets() is shown  # asked again (its cached answer): the same
+    (domain_id,) = free_ids(1)
+    sock = _bind(PORT_BASE + domain_id)
+    try:
+        inode = os.fstat(sock.fileno()).st_ino
+        assert (inode in (holding_sockets(domain_id) or ())) is shown
+        assert listening_sockets(domain_id) == frozenset()
+        sock.listen()
+        assert listening_sockets(domain_id) == frozenset({inode})
+        assert holding_sockets(domain_id) == frozenset({inode})
+    finally:
+        sock.close()
 
 
 def test_a_child_started_while_the_port_is_claimed_does_not_keep_it(

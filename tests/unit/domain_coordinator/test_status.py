@@ -305,6 +305,7 @@ def test_a_test_of_upstreams_runner_is_upstreams_not_a_squatter(
     ], table
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_colcon_is_named_only_for_an_id_whose_port_colcon_itself_holds(
     lock_dir: Path, children: Children, tmp_path: Path
 ) -> None:

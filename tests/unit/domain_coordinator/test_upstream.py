@@ -54,6 +54,7 @@ def _colcon_child(
     return pid, children.processes[-1].pid
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_an_id_colcons_coordinator_set_and_holds_is_colcons(
     children: Children, tmp_path: Path
 ) -> None:
@@ -68,10 +69,13 @@ def test_an_id_colcons_coordinator_set_and_holds_is_colcons(
         None,
     )
     assert setter.value == str(domain_id) and "colcon" in setter.command
+    # This kernel shows colcon's socket (the probe asked): nothing unseen about it.
+    assert upstream.unseen_colcon(pid, str(domain_id)) is None
     # Asked with another value than the process started with: not what colcon gave it.
     assert upstream.setter_of(pid, str(domain_id + 1)) is None
 
 
+@capabilities.SOCK_DIAG_BOUND
 def test_a_users_id_that_colcon_started_with_is_kept_as_the_users(
     children: Children, tmp_path: Path
 ) -> None:
@@ -91,6 +95,7 @@ def test_colcon_without_the_coordinator_holding_the_port_sets_nobodys_id(
     assert upstream.setter_of(pid) is None
 
 
+@capabilities.SOCK_DIAG_BOUND
 @pytest.mark.parametrize("holder", ["bound", "listening"])
 def test_colcon_not_holding_the_port_sets_nobodys_id_whoever_else_holds_it(
     children: Children, tmp_path: Path, holder: str
@@ -114,6 +119,42 @@ def test_colcon_not_holding_the_port_sets_nobodys_id_whoever_else_holds_it(
     pid, colcon = _colcon_child(children, tmp_path, domain_id)
     setter = upstream.setter_of(pid)
     assert setter is not None and (setter.kind, setter.pid) == (upstream.COLCON, colcon)
+
+
+@pytest.mark.parametrize("holder", ["colcon", "listener", "nobody"])
+def test_where_the_kernel_hides_bound_sockets_colcons_held_id_is_unseen(
+    children: Children, tmp_path: Path, holder: str
+) -> None:
+    """The probe's answer given as on Linux before 6.8 (no bound-only socket shown): an ID
+    colcon set whose port a socket holds unseen may be its coordinator's, said so in one
+    line; one a listener holds (every kernel shows listeners) or nobody holds is not. The
+    control, the probe asked on a kernel that shows them: the first test of this file."""
+    domain_id = free_ids(1)[0]
+    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        if holder == "listener":
+            listener.bind(("", port_guard.PORT_BASE + domain_id))
+            listener.listen()
+        hold = "hold" if holder == "colcon" else "free"
+        pid, colcon = _colcon_child(children, tmp_path, domain_id, hold=hold)
+        unseen = upstream.unseen_colcon(pid, str(domain_id), bound_shown=False)
+    finally:
+        listener.close()
+    if holder != "colcon":
+        assert unseen is None
+        return
+    assert unseen is not None
+    assert (unseen.kind, unseen.pid, unseen.domain_id) == (upstream.COLCON, colcon, domain_id)
+    assert upstream.setter_of(pid, bound_shown=False) is None  # what such a kernel shows
+    line = upstream.unseen_cause(unseen)
+    assert "\n" not in line
+    assert line.startswith(
+        f"ROS_DOMAIN_ID is already set to '{domain_id}' by colcon (pid {colcon}) and port "
+        f"{port_guard.PORT_BASE + domain_id} is taken, but colcon's domain-ID coordinator "
+        "cannot be told apart on this kernel (Linux before 6.8 shows no bound-only sockets): "
+    )
+    blocked = upstream.BLOCK_COORDINATOR
+    assert f"; fix: run on Linux 6.8 or later, or block the coordinator ({blocked})" in line
 
 
 def test_colcon_with_the_coordinator_blocked_sets_nobodys_id(

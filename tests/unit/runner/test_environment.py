@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import capabilities
 from helpers.commands import (
     CLI,
     ERROR_PREFIX,
@@ -64,6 +65,7 @@ def _under_colcon(
     return run_process([*colcon, *argv], env, cwd=tmp_path)
 
 
+@capabilities.SOCK_DIAG_BOUND
 @pytest.mark.parametrize("mode", MODES)
 def test_an_id_colcons_coordinator_holds_is_replaced_by_one_of_the_pool(
     runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
@@ -89,6 +91,7 @@ def test_an_id_colcons_coordinator_holds_is_replaced_by_one_of_the_pool(
     assert f"ROS_DOMAIN_ID is already set to '{colcon_id}', so" in the_error_line(control)
 
 
+@capabilities.SOCK_DIAG_BOUND
 @pytest.mark.parametrize("mode", MODES)
 def test_an_id_colcon_set_while_another_process_holds_its_port_is_refused(
     runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
@@ -109,6 +112,55 @@ def test_an_id_colcon_set_while_another_process_holds_its_port_is_refused(
     assert f"ROS_DOMAIN_ID is already set to '{colcon_id}', so" in the_error_line(proc)
 
 
+#: The policy's answer for its own ROS_DOMAIN_ID, in a process colcon's stand-in started,
+#: the kernel's probe answered by argv[1]: "hidden" as before Linux 6.8, "probe" asked.
+POLICY_UNDER_COLCON = """
+import os, sys
+from ros_isolated_test.runner import environment
+shown = None if sys.argv[1] == "probe" else False
+try:
+    setter = environment._tool_domain(os.environ["ROS_DOMAIN_ID"], shown)
+except environment.RefusedError as error:
+    print("refused:", error)
+else:
+    print("replaced:", setter.kind, setter.domain_id)
+"""
+
+
+@pytest.mark.parametrize(
+    "probe", ["hidden", pytest.param("probe", marks=capabilities.SOCK_DIAG_BOUND.mark)]
+)
+def test_where_the_kernel_hides_colcons_socket_its_id_is_refused_saying_why(
+    env: dict[str, str], tmp_path: Path, probe: str
+) -> None:
+    """colcon holding the ID it set, the probe answered as on Linux before 6.8: refused in
+    one line that says the kernel cannot tell its coordinator apart, and the fixes. The
+    positive control, the probe asked on this kernel: the same ID is colcon's, replaced."""
+    colcon_id = free_ids(1)[0]
+    colcon = [sys.executable, str(stand_in_colcon(tmp_path)), str(colcon_id), "hold"]
+    argv = [*colcon, sys.executable, "-c", POLICY_UNDER_COLCON, probe]
+    proc = run_process(argv, env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    if probe == "probe":
+        assert proc.stdout == f"replaced: colcon {colcon_id}\n"
+        return
+    line = proc.stdout.removesuffix("\n")
+    assert "\n" not in line, proc.stdout
+    prefix = f"refused: refusing to run: ROS_DOMAIN_ID is already set to '{colcon_id}' by colcon"
+    assert line.startswith(f"{prefix} (pid "), line
+    pid, rest = line.removeprefix(f"{prefix} (pid ").split(")", 1)
+    assert pid.isdigit()  # the stand-in's, started by run_process: not known before
+    assert rest == (
+        f" and port {32768 + colcon_id} is taken, but colcon's domain-ID coordinator cannot be "
+        "told apart on this kernel (Linux before 6.8 shows no bound-only sockets): the port "
+        "may be any program's and the ID a package's environment hook's; fix: run on Linux "
+        "6.8 or later, or block the coordinator (COLCON_EXTENSION_BLOCKLIST="
+        "colcon_core.shell.ros_domain_id:colcon_core.event_handler.ros_domain_id) and the "
+        "runner picks a free ID, or set DISABLE_ROS_ISOLATION=1 to run without isolation"
+    )
+
+
+@capabilities.SOCK_DIAG_BOUND
 @pytest.mark.parametrize("mode", MODES)
 def test_a_users_id_colcon_started_with_is_refused_though_colcon_replaced_it(
     runner_script: str, env: dict[str, str], tmp_path: Path, mode: str
