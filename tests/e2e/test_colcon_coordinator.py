@@ -22,7 +22,6 @@ Both packages are built with the others; each case is one cheap ``colcon test`` 
 from __future__ import annotations
 
 import re
-import shutil
 import socket
 import subprocess
 import time
@@ -33,10 +32,10 @@ from typing import TYPE_CHECKING
 
 import pytest
 from helpers import capabilities
-from helpers.commands import REPO, run_cli
+from helpers.commands import run_cli
 from helpers.domains import free_ids
 from helpers.results import load_result
-from helpers.workspace import crosstalk_workspace
+from helpers.workspace import crosstalk_workspace, two_talker_packages
 
 from ros_isolated_test.domain_coordinator.pool import parse_pool
 from ros_isolated_test.domain_coordinator.status import DomainUse, domain_uses
@@ -51,8 +50,6 @@ pytestmark = [
     capabilities.COLCON_COORDINATOR.mark,
 ]
 
-ZERO_EDIT = REPO / "examples" / "zero_edit"
-TOKEN_TALKER = REPO / "examples" / "crosstalk_demo" / "test" / "token_talker.py"
 #: The second ament_cmake package: zero_edit_talkers under another name, with other tokens.
 SECOND = ("coordinated_talkers", ("oak", "pine", "rowan"))
 PACKAGE_OF = {
@@ -99,18 +96,7 @@ class Workspace:
 
     def __init__(self, root: Path, env: Mapping[str, str]) -> None:
         self.root = root
-        shutil.copytree(
-            ZERO_EDIT / "zero_edit_talkers", root / "src" / "zero_edit" / "zero_edit_talkers"
-        )
-        shutil.copytree(ZERO_EDIT / "zero_edit_py", root / "src" / "zero_edit" / "zero_edit_py")
-        second = root / "src" / "zero_edit" / SECOND[0]
-        shutil.copytree(ZERO_EDIT / "zero_edit_talkers", second)
-        for name in ("CMakeLists.txt", "package.xml"):
-            text = (second / name).read_text().replace("zero_edit_talkers", SECOND[0])
-            (second / name).write_text(text.replace("ivy juniper kale", " ".join(SECOND[1])))
-        talker = root / "src" / "crosstalk_demo" / "test"
-        talker.mkdir(parents=True)
-        shutil.copy(TOKEN_TALKER, talker)
+        two_talker_packages(root, *SECOND)
         _hook_packages(root / "src" / "hooked")
         ws = crosstalk_workspace()
         self.env: dict[str, str] = ws.colcon_env(ws.Toolchain(base_env=env))

@@ -30,16 +30,14 @@ from pathlib import Path
 import pytest
 from helpers import capabilities, chromium
 from helpers.cmake_package import build_wheel
-from helpers.commands import REPO, run_cli
+from helpers.commands import run_cli
 from helpers.domains import free_ids
 from helpers.report_page import page_totals, parsed, timeline_bars, timeline_rows
-from helpers.workspace import crosstalk_workspace
+from helpers.workspace import crosstalk_workspace, two_talker_packages
 from lxml import etree
 
 pytestmark = [pytest.mark.colcon, capabilities.COLCON.mark]
 
-ZERO_EDIT = REPO / "examples" / "zero_edit"
-TOKEN_TALKER = REPO / "examples" / "crosstalk_demo" / "test" / "token_talker.py"
 SECOND = ("second_talkers", ("oak", "pine", "rowan"))
 CMAKE_PACKAGES = ("second_talkers", "zero_edit_talkers")
 IN_PARALLEL = ["test", "--parallel-workers", "2", "--ctest-args", "-j3"]
@@ -83,17 +81,7 @@ def colcon(
 
 
 def _workspace(root: Path) -> None:
-    src = root / "src" / "zero_edit"
-    for name in ("zero_edit_talkers", "zero_edit_py"):
-        shutil.copytree(ZERO_EDIT / name, src / name)
-    second = src / SECOND[0]
-    shutil.copytree(ZERO_EDIT / "zero_edit_talkers", second)
-    for name in ("CMakeLists.txt", "package.xml"):
-        text = (second / name).read_text().replace("zero_edit_talkers", SECOND[0])
-        (second / name).write_text(text.replace("ivy juniper kale", " ".join(SECOND[1])))
-    talker = root / "src" / "crosstalk_demo" / "test"
-    talker.mkdir(parents=True)
-    shutil.copy(TOKEN_TALKER, talker)
+    two_talker_packages(root, *SECOND)
 
 
 def _domain_ids(root: Path, build_base: str = "build") -> dict[str, str]:

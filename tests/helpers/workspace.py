@@ -120,3 +120,29 @@ class CrosstalkBuilds:
             result=ws.result_summary(base, toolchain),
         )
         return run
+
+
+#: The zero-edit example's packages and the talker every crosstalk test runs.
+ZERO_EDIT = REPO / "examples" / "zero_edit"
+TOKEN_TALKER = REPO / "examples" / "crosstalk_demo" / "test" / "token_talker.py"
+
+
+def two_talker_packages(root: Path, second: str, tokens: tuple[str, ...]) -> None:
+    """``root/src``: zero_edit_talkers, zero_edit_py and a copy of the talkers as ``second``.
+
+    The copy's three tests publish ``tokens``, so the two packages' six tests all differ;
+    the token talker sits where the packages' tests look for it.
+    """
+    import shutil
+
+    src = root / "src" / "zero_edit"
+    for name in ("zero_edit_talkers", "zero_edit_py"):
+        shutil.copytree(ZERO_EDIT / name, src / name)
+    copy = src / second
+    shutil.copytree(ZERO_EDIT / "zero_edit_talkers", copy)
+    for name in ("CMakeLists.txt", "package.xml"):
+        text = (copy / name).read_text().replace("zero_edit_talkers", second)
+        (copy / name).write_text(text.replace("ivy juniper kale", " ".join(tokens)))
+    talker = root / "src" / "crosstalk_demo" / "test"
+    talker.mkdir(parents=True)
+    shutil.copy(TOKEN_TALKER, talker)
