@@ -32,7 +32,7 @@ def status(as_json: bool) -> None:
     then the machine resources runners hold (rows with "via": "hold" and their
     "resources") and the capacity (one row with "via": "capacity"), when resources are
     held, asked for, or ROS_ISOLATED_TEST_CAPACITY is set.
-    The last line (on stderr with --json) says whether colcon on PATH loads
+    A line on stderr (stdout is the table or the JSON alone) says whether colcon on PATH loads
     ros-isolated-test's colcon extension, which isolates colcon test with no flag.
     """
     from ros_isolated_test.cli import colcon_on_path, status_table
@@ -53,5 +53,6 @@ def status(as_json: bool) -> None:
     if found.queue_problem is not None:
         click.echo(f"ros-isolated-test: note: {found.queue_problem}", err=True)
     click.echo(status_table.as_json(found) if as_json else status_table.table(found))
-    # Whether `colcon test` here is isolated with no flag: after the table, or on stderr.
-    click.echo(colcon_on_path.said(), err=as_json)
+    # Whether `colcon test` here is isolated with no flag: on stderr, as the notes are, so
+    # a script reading the table or the JSON reads them alone.
+    click.echo(colcon_on_path.said(), err=True)

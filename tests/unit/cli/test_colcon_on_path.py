@@ -103,17 +103,18 @@ def test_a_script_with_no_shebang_names_no_python_and_says_how_to_check(
 
 
 @capabilities.COLCON.mark
-def test_status_says_it_after_its_table_and_on_stderr_with_json(
+def test_status_says_it_on_stderr_and_leaves_stdout_to_the_table_or_json(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     here = {**env, "PATH": _path(VENV_BIN)}
     table = run_cli(["status"], here, cwd=tmp_path)
     assert table.returncode == 0, table.stderr
     loads = f"colcon: colcon on PATH ({VENV_BIN / 'colcon'}) {LOADS}"
-    assert table.stdout.splitlines()[-1] == loads
+    assert loads in table.stderr.splitlines()
+    assert not any(line.startswith("colcon:") for line in table.stdout.splitlines())
     as_json = run_cli(["status", "--json"], here, cwd=tmp_path)
     assert as_json.returncode == 0, as_json.stderr
     json.loads(as_json.stdout)  # still parseable
     assert loads in as_json.stderr.splitlines()
     none = run_cli(["status"], {**env, "PATH": str(tmp_path)}, cwd=tmp_path)
-    assert none.stdout.splitlines()[-1] == "colcon: no colcon on PATH"
+    assert "colcon: no colcon on PATH" in none.stderr.splitlines()
