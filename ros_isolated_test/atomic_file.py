@@ -12,6 +12,8 @@ import os
 import stat
 from pathlib import Path
 
+from ros_isolated_test import libc
+
 TYPE_CHECKING = False
 
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
@@ -144,7 +146,7 @@ def _rename_in(temp: Path, path: Path, replacing: os.stat_result | None) -> None
     looked at again). Where renameat2 cannot (an old C library or kernel, a file system
     without these flags): a check just before a plain rename.
     """
-    call = _renameat2()
+    call = libc.renameat2()
     source, target = os.fsencode(temp), os.fsencode(path)
     for _attempt in range(100):
         if call is None:
@@ -152,11 +154,11 @@ def _rename_in(temp: Path, path: Path, replacing: os.stat_result | None) -> None
         if call(_AT_FDCWD, source, _AT_FDCWD, target, _RENAME_EXCHANGE) == 0:
             _drop_or_put_back(temp, path, replacing, call)
             return
-        number = _errno()
+        number = libc.errno()
         if number == errno.ENOENT:
             if call(_AT_FDCWD, source, _AT_FDCWD, target, _RENAME_NOREPLACE) == 0:
                 return
-            number = _errno()
+            number = libc.errno()
             if number == errno.EEXIST:
                 continue  # something appeared at the path: swap and look at it
         if number in _UNSUPPORTED:
@@ -169,7 +171,7 @@ def _rename_in(temp: Path, path: Path, replacing: os.stat_result | None) -> None
 
 
 def _drop_or_put_back(
-    temp: Path, path: Path, replacing: os.stat_result | None, call: _Renameat2
+    temp: Path, path: Path, replacing: os.stat_result | None, call: libc.Renameat2
 ) -> None:
     """``temp`` holds what was at ``path``: unlink it, or swap a special file back."""
     old = os.lstat(temp)
@@ -182,41 +184,10 @@ def _drop_or_put_back(
         os.unlink(temp)
         return
     if call(_AT_FDCWD, os.fsencode(temp), _AT_FDCWD, os.fsencode(path), _RENAME_EXCHANGE):
-        number = _errno()
+        number = libc.errno()
         raise _LeftAtTemporary(
             number, f"{kind} was at the path and could not be put back from {temp}", str(path)
         )
     if kind == "a directory":
         raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
     raise NotReplaceableError(path, kind)
-
-
-if TYPE_CHECKING:
-    from collections.abc import Callable
-
-    _Renameat2 = Callable[[int, bytes, int, bytes, int], int]
-
-_RENAMEAT2: list[_Renameat2 | None] = []
-
-
-def _renameat2() -> _Renameat2 | None:
-    """The C library's renameat2, bound once; None where it has none (glibc before 2.28)."""
-    if not _RENAMEAT2:
-        import ctypes
-
-        try:
-            function = ctypes.CDLL(None, use_errno=True).renameat2
-        except (OSError, AttributeError):
-            _RENAMEAT2.append(None)
-        else:
-            text, number = ctypes.c_char_p, ctypes.c_int
-            function.argtypes = [number, text, number, text, ctypes.c_uint]
-            function.restype = ctypes.c_int
-            _RENAMEAT2.append(function)
-    return _RENAMEAT2[0]
-
-
-def _errno() -> int:
-    import ctypes
-
-    return ctypes.get_errno()

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shlex
 import stat
 import sys
 import time
@@ -48,7 +47,7 @@ from ros_isolated_test.domain_coordinator.records import (
     user_name,
 )
 from ros_isolated_test.process import proc
-from ros_isolated_test.text import display_text, json_string
+from ros_isolated_test.text import display_text, json_string, shell_join
 
 QUEUE_DIR = "queue"
 _TICKET = ".ticket"
@@ -144,7 +143,7 @@ def _record(command: Sequence[str] | None, extra: str = "") -> bytes:
     fields = (
         f'"pid": {os.getpid()}',
         f'"user": {json_string(user_name(os.getuid()))}',
-        f'"command": {json_string(shlex.join(words))}',
+        f'"command": {json_string(shell_join(words))}',
         f'"started": {time.time()!r}',
         f'"host": {json_string(os.uname().nodename)}',
         *((extra,) if extra else ()),

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import os
 import pwd
-import shlex
 import stat
 import time
 from collections.abc import Sequence
@@ -21,7 +20,7 @@ from pathlib import Path
 from ros_isolated_test.atomic_file import write_atomically
 from ros_isolated_test.domain_coordinator.lock_dir import owned_file, read_small_file
 from ros_isolated_test.process import proc
-from ros_isolated_test.text import DISPLAY_LIMIT, display_text, json_string
+from ros_isolated_test.text import DISPLAY_LIMIT, display_text, json_string, shell_join
 
 #: Latest time a record may carry: the end of year 9999, which every strftime can show.
 LATEST_TIME = 253402300799.0
@@ -144,7 +143,7 @@ def write_record(lock_dir: Path, domain_id: int, command: Sequence[str]) -> Path
         domain_id=domain_id,
         pid=os.getpid(),
         user=user_name(os.getuid()),
-        command=shlex.join(command),
+        command=shell_join(command),
         started=time.time(),
         host=os.uname().nodename,
     )

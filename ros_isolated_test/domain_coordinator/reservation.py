@@ -27,7 +27,7 @@ import stat
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
-from ros_isolated_test.domain_coordinator import participants, port_guard, records, resource_holds
+from ros_isolated_test.domain_coordinator import participants, port_guard, records
 from ros_isolated_test.domain_coordinator.block import blocking_survivors, write_block
 from ros_isolated_test.domain_coordinator.escaped import escaped_processes
 from ros_isolated_test.domain_coordinator.flock import try_lock as _try_flock
@@ -113,6 +113,8 @@ class Reservation:
         try:
             path = write_block(self.lock_dir, self.domain_id, processes)
             if self.holding is not None:
+                from ros_isolated_test.domain_coordinator import resource_holds
+
                 resource_holds.keep_for(self.holding, processes)
         except OSError:
             self.unclean = True
@@ -170,6 +172,8 @@ class ResourceHold:
 
     def block_for(self, processes: Iterable[proc.Stat]) -> Path:
         """Keep the resources held while any of ``processes`` lives (see Reservation's)."""
+        from ros_isolated_test.domain_coordinator import resource_holds
+
         return resource_holds.keep_for(self.holding, processes)
 
     def release(self) -> None:
@@ -385,6 +389,9 @@ class DomainCoordinator:
         reservation = self.try_reserve(command) if domain else None
         if domain and reservation is None:
             return None
+        # Only a runner that asks for resources loads their rules (so do ``waiting``'s).
+        from ros_isolated_test.domain_coordinator import resource_holds
+
         holding = resource_holds.hold(
             self.lock_dir,
             command,

@@ -15,7 +15,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ros_isolated_test import not_run
-from ros_isolated_test.domain_coordinator import resource_holds
 from ros_isolated_test.domain_coordinator.lock_dir import ensure_lock_dir
 from ros_isolated_test.domain_coordinator.queue import RESOURCE_MARK, Queue
 from ros_isolated_test.domain_coordinator.resources import describe
@@ -92,6 +91,8 @@ class Waiting:
         was_short, mark = self.short is not None, start
         extra = ""
         if self.resources:
+            from ros_isolated_test.domain_coordinator import resource_holds
+
             extra = resource_holds.ticket_fields(self.resources, self.capacity, domain)
         with queue.ticket(command, extra, marked=bool(self.resources)) as ticket:
             if queue.problem is not None and on_wait is not None:
@@ -137,6 +138,8 @@ class Waiting:
             if before != "" and self.id_ahead(queue, before):
                 return None, False
             return take(domain), True
+        from ros_isolated_test.domain_coordinator import resource_holds
+
         with resource_holds.mutex(self.lock_dir) as held:
             if not held:
                 return None, True  # someone is deciding: look again soon
@@ -166,6 +169,8 @@ class Waiting:
             return False
         if not any(name.endswith(RESOURCE_MARK + ".ticket") for name in earlier):
             return True
+        from ros_isolated_test.domain_coordinator import resource_holds
+
         board = resource_holds.picture(self.lock_dir, queue, {}, {})
         _fits, turn = board.may_go(resource_holds.Demand(before or "~", {}, True), before)
         return not turn

@@ -26,6 +26,8 @@ import errno
 import os
 import signal
 
+from ros_isolated_test import libc
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -68,20 +70,12 @@ HELD_BACK = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 #: How a child that found its runner already dead exits (nobody reads it).
 ORPHANED = 125
 
-_PRCTL: Callable[..., int] | None = None
-
-
 def prctl() -> Callable[..., int]:
-    """The C library's prctl, bound once before a fork: the child only calls it."""
-    global _PRCTL
-    if _PRCTL is None:
-        import ctypes
-
-        function = ctypes.CDLL(None, use_errno=True).prctl
-        function.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong]
-        function.restype = ctypes.c_int
-        _PRCTL = function
-    return _PRCTL
+    """The C library's prctl, bound before a fork: the child only calls it."""
+    function = libc.prctl()
+    if function is None:  # no Linux C library lacks it
+        raise OSError(errno.ENOSYS, "the C library has no prctl")
+    return function
 
 
 def threads() -> int:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import contextlib
 import os
 
+from ros_isolated_test import libc
+
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
     from collections.abc import Container
@@ -35,23 +37,12 @@ def stop_subreaper() -> bool:
 
 def is_subreaper() -> bool:
     """Whether this process adopts orphans already (PID 1 always does)."""
-    if os.getpid() == 1:
-        return True
-    import ctypes
-
-    flag = ctypes.c_int(0)
-    return _prctl(_PR_GET_CHILD_SUBREAPER, ctypes.addressof(flag)) and flag.value != 0
+    return os.getpid() == 1 or bool(libc.prctl_get_int(_PR_GET_CHILD_SUBREAPER))
 
 
 def _prctl(option: int, argument: int) -> bool:
-    import ctypes
-
-    try:
-        # The running process's own symbols: no ldconfig lookup (find_library runs one).
-        libc = ctypes.CDLL(None, use_errno=True)
-        return bool(libc.prctl(option, ctypes.c_ulong(argument), 0, 0, 0) == 0)
-    except (OSError, AttributeError):
-        return False
+    call = libc.prctl()
+    return call is not None and call(option, argument, 0) == 0
 
 
 def reap_orphans(keep: int | None = None, spare: Container[tuple[int, int]] = ()) -> int:

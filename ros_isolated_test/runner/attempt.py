@@ -8,7 +8,6 @@ the result's final word only after the ID is released (``verdict``).
 from __future__ import annotations
 
 import os
-import shlex
 import time
 
 from ros_isolated_test import names
@@ -16,6 +15,7 @@ from ros_isolated_test.domain_coordinator.pool import id_ranges
 from ros_isolated_test.process import supervisor
 from ros_isolated_test.runner.isolation import isolation, leftover_note
 from ros_isolated_test.runner.summary import header_line, resources_summary, summary
+from ros_isolated_test.text import shell_join
 from ros_isolated_test.xunit.timeline import timeline_properties
 
 TYPE_CHECKING = False  # no typing import on a test's path
@@ -75,7 +75,7 @@ def attempt(
             capture.note(line)
         result.properties.update(properties)
         env = policy.env if domain_id is None else policy.for_domain(domain_id)
-        capture.note(f"invoking in '{os.getcwd()}': {shlex.join(command)}")
+        capture.note(f"invoking in '{os.getcwd()}': {shell_join(command)}")
         started = time.time()
         outcome = supervisor.run(
             command,

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from ros_isolated_test.xunit.result_file import ResultFile
 
 #: The suite property saying how many reruns a failed test was allowed.
-RERUNS_PROPERTY = "rerun_failures"
+RERUNS_PROPERTY = names.RERUN_FAILURES
 #: The suite property saying how many it was allowed as flaky by the test history.
 RERUNS_FLAKY_PROPERTY = "rerun_flaky"
 

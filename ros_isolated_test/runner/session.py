@@ -32,7 +32,6 @@ from ros_isolated_test.runner import environment, exit_codes, settings, shard, s
 from ros_isolated_test.runner.attempt import attempt
 from ros_isolated_test.runner.interruption import Guard, Interrupted, interruptible
 from ros_isolated_test.runner.request import Mode, RunRequest
-from ros_isolated_test.runner.reruns import RERUNS_PROPERTY, reruns
 from ros_isolated_test.runner.summary import NOTES_SEPARATOR, SETTINGS_NOTES
 from ros_isolated_test.runner.verdict import conclude, streams_noted
 from ros_isolated_test.xunit.model import Outcome
@@ -152,7 +151,7 @@ def _attempted(
         # Recorded before the reservation: a run that gets no ID says it too.
         result.properties[SETTINGS_NOTES] = NOTES_SEPARATOR.join(config.notes)
     if config.reruns:
-        result.properties[RERUNS_PROPERTY] = str(config.reruns)
+        result.properties[names.RERUN_FAILURES] = str(config.reruns)
     # What every attempt's result starts from (an attempt adds its ID, its exit, ...).
     base = dict(result.properties)
     try:
@@ -169,6 +168,8 @@ def _attempted(
     guard.result = result
     guard.note_late()  # one that came while the ID was released
     if config.reruns or config.reruns_flaky:  # reruns_flaky: where the history says flaky
+        from ros_isolated_test.runner.reruns import reruns  # a test that has none loads none
+
         code = reruns(request, policy, config, result, both, guard, base, outcome, domain_id)
     else:
         code = conclude(request, result, both.capture, outcome)

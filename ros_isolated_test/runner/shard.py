@@ -24,7 +24,6 @@ import contextlib
 from ros_isolated_test import __version__
 from ros_isolated_test.runner import exit_codes, streams
 from ros_isolated_test.runner.request import Mode
-from ros_isolated_test.shard import record
 
 TYPE_CHECKING = False  # no typing import on a test's path
 if TYPE_CHECKING:
@@ -93,6 +92,8 @@ def _leave_record(result: ResultFile, selection: Selection, console: BinaryIO) -
     """Leave the machine's record beside the result path; a failure is said, never fatal."""
     if result.path is None:
         return
+    # Only in a split: a test's path without a share loads neither.
+    from ros_isolated_test.shard import record
     from ros_isolated_test.xunit.validate import hostname
 
     try:

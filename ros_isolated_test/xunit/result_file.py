@@ -25,7 +25,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -38,7 +37,7 @@ from ros_isolated_test.atomic_file import (
     special_kind,
     write_atomically,
 )
-from ros_isolated_test.text import shown
+from ros_isolated_test.text import shell_join, shown
 from ros_isolated_test.xunit import placeholder, serialise, validate
 from ros_isolated_test.xunit.canonical import read_cases
 from ros_isolated_test.xunit.kept_files import (
@@ -73,7 +72,7 @@ class ResultFile:
         self.package = package
         self.test_name = test_name
         self.started = time.time()
-        self.properties: dict[str, str] = {"command": shlex.join(command)}
+        self.properties: dict[str, str] = {"command": shell_join(command)}
         self.placeholder: bytes | None = None
         #: What was wrong with the test's own file, for the console.
         self.problems: list[str] = []

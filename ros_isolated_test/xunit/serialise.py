@@ -13,7 +13,6 @@ import re
 from collections.abc import Iterable
 
 from ros_isolated_test import __version__, names
-from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT, attempt_count, kept
 from ros_isolated_test.xunit.gitlab import written_type
 from ros_isolated_test.xunit.model import Attempt, Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import TEXT_LIMIT, name_token, xml_safe
@@ -70,6 +69,8 @@ def _attempt(lines: list[str], attempt: Attempt) -> None:
 
     junit-10 requires ``type``: a producer that gave none gets the outcome's name.
     """
+    from ros_isolated_test.xunit.attempts import ATTEMPT_TEXT_LIMIT
+
     message = xml_safe(attempt.message, ATTEMPT_TEXT_LIMIT)
     fallback = "error" if attempt.kind.endswith("Error") else "failure"
     head = _start(
@@ -129,7 +130,11 @@ def _case(lines: list[str], case: Case) -> None:
         body.append(
             f"      {outcome}>{text(content)}</{tag}>\n" if content else f"      {outcome}/>\n"
         )
-    attempts = kept(case.attempts)
+    attempts: list[Attempt] = []
+    if case.attempts:  # reruns only: a test run once never loads their rules
+        from ros_isolated_test.xunit.attempts import attempt_count, kept
+
+        attempts = kept(case.attempts)
     if case.outcome is Outcome.PASSED and attempts:
         # The output first: xunit-viewer takes a case's status from its first child.
         note = flaky_note(case.system_out, attempt_count(case.attempts), len(attempts))

@@ -12,8 +12,8 @@ from __future__ import annotations
 import os
 import time
 
+from ros_isolated_test import names
 from ros_isolated_test.xunit import serialise
-from ros_isolated_test.xunit.attempts import FLAKY_PROPERTY
 from ros_isolated_test.xunit.model import Case, Outcome, Suite
 from ros_isolated_test.xunit.xml_text import name_token
 
@@ -62,10 +62,10 @@ def problems(root: etree._Element) -> list[str]:
             if (case.find("flakyFailure") is not None or case.find("flakyError") is not None)
             and case.find("skipped") is None
         )
-        for prop in suite.iterfind(f"properties/property[@name='{FLAKY_PROPERTY}']"):
+        for prop in suite.iterfind(f"properties/property[@name='{names.FLAKY_CASES}']"):
             if prop.get("value") != str(flaky):
                 found.append(
-                    f"suite {suite.get('name')}: property {FLAKY_PROPERTY}={prop.get('value')},"
+                    f"suite {suite.get('name')}: property {names.FLAKY_CASES}={prop.get('value')},"
                     f" cases say {flaky}"
                 )
     return found
@@ -146,6 +146,6 @@ def _internal_error(suite: Suite, found: list[str]) -> Suite:
         properties={
             key: value
             for key, value in suite.properties.items()
-            if key and value and key != FLAKY_PROPERTY
+            if key and value and key != names.FLAKY_CASES
         },
     )

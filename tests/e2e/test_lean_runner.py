@@ -45,7 +45,24 @@ HEAVY = (
     "click",
     # Only to decode the output tail, which a passing test's result never shows.
     "locale",
+    # The C functions are bound through _ctypes (ros_isolated_test.libc); shell quoting
+    # is ros_isolated_test.text's.
+    "ctypes",
+    "shlex",
 )
+#: What each feature loads, and how a test asks for it: a test that does not ask loads none.
+FEATURES = {
+    "split": ({"ROS_ISOLATED_TEST_SHARD": "1/1"}, "ros_isolated_test.shard.record"),
+    "reruns": ({"ROS_ISOLATED_TEST_RERUNS": "1"}, "ros_isolated_test.runner.reruns"),
+    "resources": (
+        {"ROS_ISOLATED_TEST_RESOURCES": "cpu=1"},
+        "ros_isolated_test.domain_coordinator.resource_holds",
+    ),
+    # A rerun that passed: the result keeps the failed attempt.
+    "attempts": ({"ROS_ISOLATED_TEST_RERUNS": "1"}, "ros_isolated_test.xunit.attempts"),
+}
+#: Fails the first time, passes the second: the flaky test the "attempts" feature needs.
+_FLAKY = "test -e ran-once || { : > ran-once; exit 1; }"
 
 
 def _imported(argv: list[str], env: dict[str, str], cwd: Path | None = None) -> set[str]:
@@ -90,6 +107,24 @@ def test_a_passing_test_without_own_result_file_loads_nothing_heavy(
     assert _heavy(names, _baseline(env)) == []
     assert "ros_isolated_test.runner.session" in names, "the check must see the real run"
     assert result.is_file()
+
+
+@pytest.mark.parametrize("feature", sorted(FEATURES))
+def test_a_feature_a_test_does_not_use_costs_it_nothing(
+    runner_script: str, env: dict[str, str], tmp_path: Path, feature: str
+) -> None:
+    """The module of each feature loads only when it is asked for: the control asks."""
+    extra, module = FEATURES[feature]
+    loaded: dict[bool, set[str]] = {}
+    for asked in (False, True):
+        command = ["sh", "-c", _FLAKY if asked and feature == "attempts" else "true"]
+        (tmp_path / "ran-once").unlink(missing_ok=True)
+        result = tmp_path / str(asked) / "pkg" / "t.xml"
+        args = [str(result), "--package-name", "pkg", "--generate-result-on-success"]
+        given = {**env, **extra} if asked else env
+        loaded[asked] = _loaded_by(runner_script, [*args, "--command", *command], given, tmp_path)
+    assert module not in loaded[False]
+    assert module in loaded[True], "the control: asked for, the feature loads its module"
 
 
 @pytest.mark.parametrize("share", ["1/2", "2/2"])

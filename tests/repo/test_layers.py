@@ -9,7 +9,8 @@ then ``report`` (a tree of result files counted, printed and drawn: it reads eac
 through ``xunit``, and sits below ``runner`` so that a runner may read what a report
 wrote, such as measured durations), then ``domain_coordinator``, then ``process`` and
 ``xunit``, then ``shard`` (splitting tests over machines: all the above read it), then
-at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``, ``names`` (the
+at the bottom ``schemas``, ``text``, ``switches``, ``atomic_file``, ``libc`` (the C
+library's prctl and renameat2), ``names`` (the
 registry of variables and properties), ``not_run`` (the base of the errors that stop a
 test before it runs) and the package's own ``__init__`` (its version). A module imports
 within its own unit (a package, or the modules named together below) or from any lower
@@ -54,6 +55,7 @@ LAYERS = (
     {
         "": "bottom",
         "atomic_file": "bottom",
+        "libc": "bottom",
         "names": "bottom",
         "not_run": "bottom",
         "schemas": "bottom",

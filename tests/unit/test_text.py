@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 
 import pytest
 
@@ -19,6 +20,7 @@ from ros_isolated_test.text import (
     bounded,
     display_text,
     json_string,
+    shell_join,
     shown,
     shown_code,
 )
@@ -117,3 +119,20 @@ def test_json_string_is_a_json_literal_that_reads_back_as_the_text(
 def test_json_string_keeps_printable_characters_as_they_are() -> None:
     assert json_string("caf\u00e9 \u2713") == '"caf\u00e9 \u2713"'
     assert json_string('say "hi"\n') == '"say \\"hi\\"\\u000a"'
+
+
+@pytest.mark.parametrize(
+    "words",
+    [
+        [],
+        ["true"],
+        [""],
+        ["sh", "-c", "echo 'a b' > out; exit 3"],
+        ["path/with_under-score.py", "--key=value,1:2@host%x+y"],
+        ["tab\there", "new\nline", "dollar$HOME", "star*", "back\\slash", '"quoted"'],
+        ["é-not-ascii", "\udce9-undecodable", "a'b'c"],
+    ],
+)
+def test_shell_join_quotes_as_shlex_does(words: list[str]) -> None:
+    """The control is shlex itself: the same line for every kind of word."""
+    assert shell_join(words) == shlex.join(words)
