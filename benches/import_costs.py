@@ -52,6 +52,8 @@ LIBRARIES = (
     ("xml.sax.saxutils", None, "XML escaping: `xunit/serialise.py`"),
     ("psutil", "psutil", "processes: `process/proc.py`"),
     ("dataclasses", None, "plain classes on a test's path: `runner/request.py`, `xunit/model.py`"),
+    ("ctypes", None, "C library calls: `libc.py`, through `_ctypes` (which the RUNNER loads)"),
+    ("shlex", None, "a command as a shell line: `text.shell_join`"),
 )
 _MARK = "import-costs: the library follows"
 _CODE = "import {baseline}; import sys; sys.stderr.write({mark!r} + '\\n'); import {module}"

@@ -362,9 +362,10 @@ def run(ctx: Context) -> Section:
     section.notes.append(
         f"What a machine pays besides its tests, in (a) at N={most} (its wall time less its "
         f"tests' measured time): {secs(min(fixed))} to {secs(max(fixed))}: colcon's start, "
-        "each package's environment set-up and ctest, and a RUNNER for every test of the "
-        "workspace (a test of another share exits 77 within about 50 ms). It is what keeps "
-        "a split's makespan above the bound, the same on every machine."
+        "each package's environment set-up and ctest, and the one process per package that "
+        "plans its share (ctest disables the other shares' tests, so no RUNNER starts for "
+        "them). It is what keeps a split's makespan above the bound, the same on every "
+        "machine."
     )
     measured_total = sum(durations.micros.values()) / MICROS
     longest = max(durations.micros.values()) / MICROS
