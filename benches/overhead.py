@@ -300,8 +300,10 @@ def run(ctx: Context) -> Section:
         "the runner's own work (wall - start-up), quiet",
         lambda r: ms(own[r]),
         lambda o, u: ratio(own[o], own[u]),
-        f"ours / upstream ≤ {OWN_WORK_RATIO:.2f}: " + ", ".join(own_ratio_state)
-        + f"; ours < {OWN_WORK_TARGET * 1000:.0f} ms: " + ", ".join(own_state),
+        f"ours / upstream ≤ {OWN_WORK_RATIO:.2f}: "
+        + ", ".join(own_ratio_state)
+        + f"; ours < {OWN_WORK_TARGET * 1000:.0f} ms: "
+        + ", ".join(own_state),
     )
 
     def probe_cell(index: int) -> Callable[[str], str]:

@@ -189,9 +189,7 @@ class BoundedText:
 
 
 #: What a shell takes literally, as ``shlex.quote`` decides it (``[\w@%+=:,./-]``, ASCII).
-_SHELL_SAFE = frozenset(
-    "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_@%+=:,./-"
-)
+_SHELL_SAFE = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_@%+=:,./-")
 
 
 def shell_join(words: Iterable[str]) -> str:
@@ -209,4 +207,3 @@ def _shell_quote(word: str) -> str:
     if all(char in _SHELL_SAFE for char in word):
         return word
     return "'" + word.replace("'", "'\"'\"'") + "'"
-

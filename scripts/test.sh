@@ -6,6 +6,7 @@ root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$root"
 scripts/setup.sh
 .venv/bin/ruff check ros_isolated_test tests examples scripts benches install_check setup.py
+.venv/bin/ruff format --check ros_isolated_test tests examples scripts benches install_check setup.py
 .venv/bin/mypy
 scripts/py310_smoke.sh
 # The runner's own tests on Ubuntu 24.04's Python 3.12 and packages (.venv-py312).

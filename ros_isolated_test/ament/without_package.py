@@ -61,7 +61,6 @@ def _interpreter_of_cli() -> "str | None":
     return interpreter if interpreter and os.access(interpreter, os.X_OK) else None
 
 
-
 def _write_not_run(argv: "list[str]", message: str) -> None:
     """Leave RESULT_FILE (ament passes it first) as a canonical file with one error case.
 

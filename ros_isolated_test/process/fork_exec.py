@@ -70,6 +70,7 @@ HELD_BACK = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 #: How a child that found its runner already dead exits (nobody reads it).
 ORPHANED = 125
 
+
 def prctl() -> Callable[..., int]:
     """The C library's prctl, bound before a fork: the child only calls it."""
     function = libc.prctl()

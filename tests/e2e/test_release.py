@@ -157,8 +157,7 @@ def test_the_wheel_alone_in_a_fresh_venv_gives_every_way_in(
     assert f"ros_isolated_test_DIR:PATH={installed}/share/ros_isolated_test/cmake" in cache
 
     (tmp_path / "test_domain.py").write_text(
-        "import os\n\ndef test_domain():\n"
-        f"    assert os.environ['ROS_DOMAIN_ID'] == '{pool_id}'\n"
+        f"import os\n\ndef test_domain():\n    assert os.environ['ROS_DOMAIN_ID'] == '{pool_id}'\n"
     )
     tested = _in_fresh_venv(
         installed, tmp_path, "python", "-m", "pytest", "-p", "no:cacheprovider",

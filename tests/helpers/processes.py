@@ -6,6 +6,7 @@ Tests that hold IDs in other processes (holders, waiters, other users' runners) 
 
 from __future__ import annotations
 
+import os
 import pwd
 import select
 import subprocess
@@ -55,10 +56,23 @@ class Children:
         return self.start([sys.executable, "-c", script, *map(str, args)], **kwargs)
 
     def first_line(self, process: subprocess.Popen[str]) -> str:
-        """The child's first line of output, or a failure showing why it never came."""
+        """The child's next line of output, or a failure showing why it never came.
+
+        Read from the descriptor a byte at a time: a buffered ``readline`` may take the
+        lines after it too, and a ``select`` on the descriptor then waits for output
+        that was already read (the next call would fail although its line had come).
+        """
         assert process.stdout is not None
-        ready, _, _ = select.select([process.stdout], [], [], DEADLINE)
-        line = process.stdout.readline() if ready else ""
+        fd = process.stdout.fileno()
+        data = b""
+        deadline = time.monotonic() + DEADLINE
+        while not data.endswith(b"\n"):
+            ready, _, _ = select.select([fd], [], [], max(deadline - time.monotonic(), 0.0))
+            byte = os.read(fd, 1) if ready else b""
+            if not byte:
+                break  # the deadline, or the end of its output
+            data += byte
+        line = data.decode("utf-8", "replace")
         if not line:
             process.kill()
             _, stderr = process.communicate(timeout=DEADLINE)

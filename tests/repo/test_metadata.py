@@ -45,7 +45,7 @@ def test_pyproject_reads_the_version_from_the_package() -> None:
 
 def test_package_xml_and_the_cmake_package_repeat_it() -> None:
     assert parse_package(str(REPO)).version == VERSION
-    cmake = (REPO / "ros_isolated_test" / "cmake" / "ros_isolated_testConfigVersion.cmake")
+    cmake = REPO / "ros_isolated_test" / "cmake" / "ros_isolated_testConfigVersion.cmake"
     assert f'set(PACKAGE_VERSION "{VERSION}")' in cmake.read_text()
 
 
