@@ -169,6 +169,7 @@ RESOURCES_WAITED = "resources_waited"
 CAPACITY_PROPERTY = "capacity"
 SETTINGS_NOTES = "settings_notes"
 RERUN_FAILURES = "rerun_failures"
+RERUN_FLAKY = "rerun_flaky"
 RERUN_NOT_RUN = "rerun_not_run"
 RESULT_FILE_REPAIRS = "result_file_repairs"
 ORIGINAL_RESULT_FILE = "original_result_file"
@@ -222,6 +223,7 @@ PROPERTIES = (
     Name(FLAKY_CASES, "how many cases passed after failing", "report"),
     Name(RENAMED_CASES, "cases renamed apart for GitLab's keys", "report"),
     Name(RERUN_FAILURES, "the reruns allowed", "report"),
+    Name(RERUN_FLAKY, "the reruns allowed because the test history calls the test flaky", "report"),
     Name(RERUN_NOT_RUN, "why a rerun did not run", "report"),
     Name(RESULT_FILE_REPAIRS, "what was fixed in the test's own file", "report"),
     Name(RESULT_FILE_IN_PLACE, "the test wrote its file in place itself", "report"),

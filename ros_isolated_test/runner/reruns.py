@@ -27,11 +27,6 @@ if TYPE_CHECKING:
     from ros_isolated_test.runner.streams import Streams
     from ros_isolated_test.xunit.result_file import ResultFile
 
-#: The suite property saying how many reruns a failed test was allowed.
-RERUNS_PROPERTY = names.RERUN_FAILURES
-#: The suite property saying how many it was allowed as flaky by the test history.
-RERUNS_FLAKY_PROPERTY = "rerun_flaky"
-
 
 def flaky_by_history(request: RunRequest) -> str | None:
     """The line to say when the test history calls this test flaky; None when it does not.
@@ -100,8 +95,8 @@ def reruns(
             if said is not None:
                 total = config.reruns_flaky + 1
                 capture.note(said)
-                base[RERUNS_FLAKY_PROPERTY] = str(config.reruns_flaky)  # every attempt's
-                result.properties[RERUNS_FLAKY_PROPERTY] = base[RERUNS_FLAKY_PROPERTY]
+                base[names.RERUN_FLAKY] = str(config.reruns_flaky)  # every attempt's
+                result.properties[names.RERUN_FLAKY] = base[names.RERUN_FLAKY]
         if why is None or number == total or guard.late is not None:
             break
         number += 1
