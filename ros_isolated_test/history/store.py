@@ -120,12 +120,18 @@ def connect(path: Path, write: bool = True) -> sqlite3.Connection:
 def _shaped(connection: sqlite3.Connection, path: Path, write: bool) -> None:
     """Check the file is ours and at the current schema, migrating (or creating) it."""
     version = _checked(connection, path)
-    if version == VERSION:
-        return
-    if not write:
-        raise problem(path, ValueError(f"schema version {version}, not {VERSION}: record into it"))
-    if connection.execute("PRAGMA journal_mode").fetchone()[0] != "wal":
-        connection.execute("PRAGMA journal_mode = WAL")
+    if version != VERSION:
+        if not write:
+            raise problem(
+                path, ValueError(f"schema version {version}, not {VERSION}: record into it")
+            )
+        _migrated(connection, path)
+    if write:
+        _in_wal_mode(connection)
+
+
+def _migrated(connection: sqlite3.Connection, path: Path) -> None:
+    """Take the database to the current schema in one transaction (creating it if empty)."""
     connection.execute("BEGIN IMMEDIATE")
     try:
         version = _checked(connection, path)  # another process may have done it meanwhile
@@ -141,12 +147,42 @@ def _shaped(connection: sqlite3.Connection, path: Path, write: bool) -> None:
         raise
 
 
+def _in_wal_mode(connection: sqlite3.Connection) -> None:
+    """Put the file in WAL mode (kept by the file) unless another process is using it.
+
+    WAL lets readers and a writer share the file. Switching needs the file alone for a
+    moment and SQLite does not wait for that (the busy timeout is not used): when
+    eight recorders create one database at once, all but one were refused with
+    "database is locked". A busy switch is left to the next writer; until then the
+    file works in rollback mode, where the busy timeout serialises everyone.
+    """
+    if connection.execute("PRAGMA journal_mode").fetchone()[0] == "wal":
+        return
+    try:
+        connection.execute("PRAGMA journal_mode = WAL")
+    except sqlite3.OperationalError as error:
+        if "locked" not in str(error):
+            raise
+
+
 def _checked(connection: sqlite3.Connection, path: Path) -> int:
-    """The schema version of an empty or own database; :class:`StoreError` for any other."""
-    application = connection.execute("PRAGMA application_id").fetchone()[0]
-    version = int(connection.execute("PRAGMA user_version").fetchone()[0])
-    if application == 0 and version == 0:
+    """The schema version of an empty or own database; :class:`StoreError` for any other.
+
+    The three values are read in one read transaction: read one by one, another
+    process's creation committed between them showed a half-made file (no application
+    ID, yet a version or tables) and this refused it as another program's.
+    """
+    alone = not connection.in_transaction
+    if alone:
+        connection.execute("BEGIN")
+    try:
+        application = connection.execute("PRAGMA application_id").fetchone()[0]
+        version = int(connection.execute("PRAGMA user_version").fetchone()[0])
         tables = connection.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+    finally:
+        if alone:
+            connection.execute("COMMIT")
+    if application == 0 and version == 0:
         if tables:
             raise problem(path, ValueError("an SQLite file of another program, not a test history"))
         return 0
